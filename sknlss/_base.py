@@ -1,0 +1,307 @@
+"""Shared behaviour of the state-space estimators.
+
+Every estimator identifies a discrete-time model
+
+    x(t+1) = f(x(t), u(t)),    y(t) = g(x(t), u(t))
+
+on normalised signals ``u_n = (u - u_offset_) / u_scale_`` and
+``y_n = (y - y_offset_) / y_scale_``. The base class owns what is common to all
+of them: input validation, splitting the rows into sequences, the offsets and
+scales, the initial state, free-run simulation and scoring. Subclasses implement
+``_fit_normalized`` and ``_simulate_normalized``.
+"""
+
+import warnings
+from abc import ABCMeta, abstractmethod
+from numbers import Integral
+
+import numpy as np
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.metrics import r2_score
+from sklearn.utils._param_validation import Interval
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+#: Largest absolute normalised state value a simulation may reach before it is
+#: declared divergent. Normalised signals have unit standard deviation, so any
+#: physically meaningful trajectory stays many orders of magnitude below it.
+DIVERGENCE_BOUND = 1e6
+
+
+class SimulationDivergedWarning(RuntimeWarning):
+    """Warning raised when a simulated trajectory leaves the bounded region.
+
+    The outputs from the first divergent sample to the end of that sequence are
+    set to NaN.
+    """
+
+
+def sequence_bounds(sequence_id, n_samples):
+    """Return the row boundaries of the sequences.
+
+    Parameters
+    ----------
+    sequence_id : array-like of shape (n_samples,) or None
+        Integer label of the experiment each row belongs to. Each label must
+        occupy one contiguous block of rows. ``None`` means a single sequence.
+    n_samples : int
+        Number of rows of ``X``.
+
+    Returns
+    -------
+    starts : ndarray of shape (n_sequences + 1,)
+        Sequence ``k`` occupies rows ``starts[k]:starts[k + 1]``.
+    """
+    if sequence_id is None:
+        return np.array([0, n_samples], dtype=np.int64)
+    ids = np.asarray(sequence_id)
+    if ids.ndim != 1 or ids.shape[0] != n_samples:
+        raise ValueError(
+            f"sequence_id must be a 1-D array with one label per sample: got shape "
+            f"{ids.shape} for X with {n_samples} samples."
+        )
+    if ids.dtype.kind not in "iub":
+        if ids.dtype.kind == "f" and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)):
+            ids = ids.astype(np.int64)
+        else:
+            raise ValueError(
+                f"sequence_id must hold integer labels, got dtype {ids.dtype}."
+            )
+    change = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+    starts = np.concatenate(([0], change, [n_samples])).astype(np.int64)
+    run_labels = ids[starts[:-1]]
+    labels, counts = np.unique(run_labels, return_counts=True)
+    if np.any(counts > 1):
+        raise ValueError(
+            "sequence_id must label each sequence by one contiguous block of rows; "
+            f"label(s) {labels[counts > 1].tolist()} occur in separate blocks."
+        )
+    return starts
+
+
+def transient_mask(starts, n_transient):
+    """Boolean mask of the rows kept once ``n_transient`` samples per sequence are dropped."""
+    mask = np.ones(starts[-1], dtype=bool)
+    for begin, end in zip(starts[:-1], starts[1:]):
+        mask[begin : min(begin + n_transient, end)] = False
+    return mask
+
+
+def holdout_masks(starts, n_transient, validation_fraction):
+    """Rows used for the cost and rows held out for selection.
+
+    The last ``validation_fraction`` of every sequence is held out; the first
+    ``n_transient`` samples of every sequence are in neither set. Simulations run
+    over whole sequences, so the held-out tail continues from the state the
+    model reached at the end of the fitted part.
+
+    Returns
+    -------
+    fit_mask, validation_mask : ndarray of bool of shape (n_samples,)
+    """
+    fit_mask = transient_mask(starts, n_transient)
+    validation_mask = np.zeros_like(fit_mask)
+    if validation_fraction:
+        for begin, end in zip(starts[:-1], starts[1:]):
+            split = end - int(round(validation_fraction * (end - begin)))
+            validation_mask[max(split, begin + n_transient) : end] = True
+            fit_mask[split:end] = False
+    if not fit_mask.any():
+        raise ValueError(
+            f"n_transient={n_transient} and validation_fraction={validation_fraction} "
+            "leave no sample to fit."
+        )
+    return fit_mask, validation_mask
+
+
+def _robust_scale(values):
+    """Standard deviation per column, with 1 where a column is (nearly) constant."""
+    scale = values.std(axis=0)
+    scale[scale <= 1e-12 * np.maximum(1.0, np.abs(values).max(axis=0))] = 1.0
+    return scale
+
+
+class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
+    """Base class of the sknlss state-space estimators.
+
+    Subclasses set, in ``_fit_normalized``, at least ``A_``, ``B_``, ``C_``,
+    ``D_``, ``x0_`` and ``n_params_``, and implement ``_simulate_normalized``.
+    """
+
+    _parameter_constraints: dict = {
+        "n_transient": [Interval(Integral, 0, None, closed="left")],
+    }
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        # Dynamical models identified on i.i.d. tabular data need not beat R2=0.5.
+        tags.regressor_tags.poor_score = True
+        return tags
+
+    # ------------------------------------------------------------------ fit
+    def _validate_training_data(self, X, y, sequence_id):
+        """Validate and normalise the training data.
+
+        Returns the normalised inputs ``U`` (n_samples, n_inputs), outputs
+        ``Y`` (n_samples, n_outputs) and the sequence boundaries.
+        """
+        X, y = validate_data(
+            self, X, y, multi_output=True, y_numeric=True, dtype=np.float64,
+            ensure_min_samples=2,
+        )
+        self._y_was_1d = y.ndim == 1
+        Y = y.reshape(len(y), -1) if y.ndim == 1 else y
+        starts = sequence_bounds(sequence_id, X.shape[0])
+        self.n_outputs_ = Y.shape[1]
+        self.u_offset_ = X.mean(axis=0)
+        self.u_scale_ = _robust_scale(X)
+        self.y_offset_ = Y.mean(axis=0)
+        self.y_scale_ = _robust_scale(Y)
+        U = np.ascontiguousarray((X - self.u_offset_) / self.u_scale_)
+        Yn = np.ascontiguousarray((Y - self.y_offset_) / self.y_scale_)
+        return U, Yn, starts
+
+    def fit(self, X, y, *, sequence_id=None):
+        """Fit the model to input/output records.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal u; rows are time samples.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+            Measured output signal.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Integer label of the experiment (record, realization) each row
+            belongs to; each label occupies one contiguous block of rows.
+            ``None`` means that all rows form one sequence.
+
+        Returns
+        -------
+        self : object
+            The fitted estimator.
+        """
+        self._validate_params()
+        U, Y, starts = self._validate_training_data(X, y, sequence_id)
+        self._fit_normalized(U, Y, starts)
+        return self
+
+    @abstractmethod
+    def _fit_normalized(self, U, Y, starts):
+        """Fit on normalised signals split into sequences by ``starts``."""
+
+    @abstractmethod
+    def _simulate_normalized(self, U, starts, x0):
+        """Simulate from initial states ``x0`` of shape (n_sequences, n_states).
+
+        Returns the normalised outputs (n_samples, n_outputs), the states
+        (n_samples, n_states) and a flag telling whether a trajectory diverged.
+        """
+
+    # ----------------------------------------------------------- simulation
+    def _initial_states(self, x0, n_sequences):
+        n_states = self.A_.shape[0]
+        if x0 is None:
+            x0 = self.x0_
+        x0 = np.asarray(x0, dtype=np.float64)
+        if x0.ndim == 1:
+            x0 = np.broadcast_to(x0, (n_sequences, x0.shape[0]))
+        if x0.shape != (n_sequences, n_states) or not np.all(np.isfinite(x0)):
+            raise ValueError(
+                f"x0 must be finite, of shape ({n_states},) or ({n_sequences}, "
+                f"{n_states}) for {n_sequences} sequence(s); got shape {x0.shape}."
+            )
+        return np.ascontiguousarray(x0)
+
+    def simulate(self, X, *, sequence_id=None, x0=None, return_states=False):
+        """Simulate the fitted model in free run.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels; each sequence starts from its own initial state.
+        x0 : array-like of shape (n_states,) or (n_sequences, n_states), default=None
+            Initial state in the model's (normalised) state coordinates.
+            ``None`` uses the fitted ``x0_`` (zero unless it was estimated).
+        return_states : bool, default=False
+            Also return the simulated states.
+
+        Returns
+        -------
+        y : ndarray of shape (n_samples,) or (n_samples, n_outputs)
+            Simulated output in the units of the training output.
+        states : ndarray of shape (n_samples, n_states)
+            State x(t) at each sample, returned when ``return_states`` is True.
+        """
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        starts = sequence_bounds(sequence_id, X.shape[0])
+        x0 = self._initial_states(x0, len(starts) - 1)
+        U = np.ascontiguousarray((X - self.u_offset_) / self.u_scale_)
+        Yn, states, diverged = self._simulate_normalized(U, starts, x0)
+        if diverged:
+            warnings.warn(
+                "The simulated state left the bounded region (|x| > "
+                f"{DIVERGENCE_BOUND:g} in normalised units): the model is unstable "
+                "for this input; outputs after the divergence are NaN.",
+                SimulationDivergedWarning,
+                stacklevel=2,
+            )
+        Y = self.y_offset_ + self.y_scale_ * Yn
+        if self._y_was_1d:
+            Y = Y[:, 0]
+        return (Y, states) if return_states else Y
+
+    def predict(self, X, *, sequence_id=None, x0=None):
+        """Free-run simulation of the output (not one-step-ahead prediction).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels; ``None`` simulates all rows as one sequence.
+        x0 : array-like of shape (n_states,) or (n_sequences, n_states), default=None
+            Initial state; ``None`` uses the fitted ``x0_``.
+
+        Returns
+        -------
+        y : ndarray of shape (n_samples,) or (n_samples, n_outputs)
+            Simulated output.
+        """
+        return self.simulate(X, sequence_id=sequence_id, x0=x0)
+
+    def score(self, X, y, *, sequence_id=None):
+        """R² of the simulated output, skipping ``n_transient`` samples per sequence.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+            Measured output.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels.
+
+        Returns
+        -------
+        score : float
+            Coefficient of determination averaged uniformly over the outputs.
+        """
+        y_pred = self.predict(X, sequence_id=sequence_id)
+        y = np.asarray(y)
+        if y.shape[0] != y_pred.shape[0]:
+            raise ValueError(
+                f"X and y have different numbers of samples: {y_pred.shape[0]} and "
+                f"{y.shape[0]}."
+            )
+        keep = transient_mask(sequence_bounds(sequence_id, len(y_pred)), self.n_transient)
+        if not keep.any():
+            raise ValueError(
+                f"n_transient={self.n_transient} leaves no sample to score."
+            )
+        y_pred = y_pred[keep]
+        if not np.all(np.isfinite(y_pred)):
+            return -np.inf
+        return r2_score(y[keep], y_pred)

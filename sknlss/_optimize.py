@@ -1,0 +1,182 @@
+"""Levenberg-Marquardt for simulation-error (output-error) problems.
+
+One private optimiser serves every estimator: it minimises ``||r(theta)||^2``
+given a function that simulates the model and returns the residual and its
+Jacobian. The step is computed from the SVD of the column-scaled Jacobian, so a
+whole sweep of damping values costs one factorisation, and the smallest singular
+directions can be discarded (the ``n^2`` directions along which a similarity
+transform of the states leaves the output unchanged).
+"""
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import svd
+from sklearn.exceptions import ConvergenceWarning
+from threadpoolctl import threadpool_limits
+
+# Damping is raised by this factor after a rejected step and lowered by
+# _DAMPING_DOWN after an accepted one (the usual asymmetric schedule).
+_DAMPING_UP = 10.0
+_DAMPING_DOWN = 0.5
+# After this many rejected steps in a row the damped step is negligible and the
+# search has stalled: no direction decreases the cost.
+_MAX_REJECTED = 14
+
+
+@dataclass
+class LMResult:
+    """Outcome of :func:`levenberg_marquardt`.
+
+    Attributes
+    ----------
+    theta : ndarray of shape (n_params,)
+        Selected parameters: the iterate with the lowest validation loss when a
+        validation function was given, else the last (lowest-cost) iterate.
+    loss_history : ndarray of shape (n_iter + 1,)
+        Mean squared residual of the current iterate, starting with the initial one.
+    validation_history : ndarray of shape (n_iter + 1,) or None
+        Validation loss of each iterate.
+    best_iter : int
+        Iteration at which ``theta`` was found (0 is the initial guess).
+    n_iter : int
+        Number of accepted steps.
+    converged : bool
+        False when the iteration limit stopped the search.
+    """
+
+    theta: np.ndarray
+    loss_history: np.ndarray
+    validation_history: np.ndarray | None
+    best_iter: int
+    n_iter: int
+    converged: bool
+
+
+def _finite_residual(residual, theta):
+    """Residual at ``theta``, or None when the simulation diverged."""
+    r = residual(theta, False)[0]
+    if r is None or not np.all(np.isfinite(r)):
+        return None
+    return r
+
+
+def levenberg_marquardt(
+    residual,
+    theta0,
+    *,
+    validation_loss=None,
+    max_iter=100,
+    tol=1e-9,
+    n_drop=0,
+    verbose=0,
+    label="LM",
+):
+    """Minimise ``sum(residual(theta)**2)`` by Levenberg-Marquardt.
+
+    Parameters
+    ----------
+    residual : callable
+        ``residual(theta, jacobian)`` returns ``(r, J)``: the residual vector of
+        shape (m,) and, when ``jacobian`` is True, its Jacobian of shape
+        (m, n_params) (else None). ``r`` is None when the simulation diverged.
+    theta0 : ndarray of shape (n_params,)
+        Starting point; its simulation must not diverge.
+    validation_loss : callable, default=None
+        ``validation_loss(theta)`` returns a float (``inf`` for a divergent
+        model); the iterate minimising it is returned.
+    max_iter : int, default=100
+        Maximum number of accepted steps.
+    tol : float, default=1e-9
+        Stop when an accepted step lowers the cost by less than ``tol`` relative.
+    n_drop : int, default=0
+        Number of smallest singular values of the scaled Jacobian to discard
+        (``n_states**2`` removes the similarity-transform invariance).
+    verbose : int, default=0
+        Print one line per iteration when positive.
+    label : str, default="LM"
+        Prefix of the progress lines.
+
+    Returns
+    -------
+    result : LMResult
+    """
+    theta = np.array(theta0, dtype=np.float64)
+    r, J = residual(theta, True)
+    if r is None or not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
+        raise ValueError(
+            "The initial model diverges or gives non-finite values on the "
+            "estimation data; it cannot start the optimisation."
+        )
+    m = r.size
+    cost = float(r @ r)
+    losses = [cost / m]
+    val_losses = None
+    best_theta, best_val, best_iter = theta.copy(), np.inf, 0
+    if validation_loss is not None:
+        best_val = validation_loss(theta)
+        val_losses = [best_val]
+
+    damping = None
+    converged = False
+    n_iter = 0
+    with threadpool_limits(limits=1, user_api="blas"):
+        while n_iter < max_iter:
+            col_scale = np.linalg.norm(J, axis=0)
+            col_scale[col_scale == 0.0] = 1.0
+            Uj, s, Vt = svd(J / col_scale, full_matrices=False, check_finite=False,
+                            lapack_driver="gesdd")
+            rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps))
+            rank = max(1, min(rank, s.size - n_drop))
+            Uj, s, Vt = Uj[:, :rank], s[:rank], Vt[:rank]
+            projected = Uj.T @ r
+            if damping is None:
+                damping = s[0]
+            for _ in range(_MAX_REJECTED):
+                step = -(Vt.T @ (s / (s**2 + damping**2) * projected)) / col_scale
+                candidate = theta + step
+                r_new = _finite_residual(residual, candidate)
+                if r_new is not None and r_new @ r_new < cost:
+                    break
+                damping *= _DAMPING_UP
+            else:
+                converged = True
+                break
+            cost_new = float(r_new @ r_new)
+            decrease = (cost - cost_new) / cost
+            theta = candidate
+            r, J = residual(theta, True)
+            cost = float(r @ r)
+            n_iter += 1
+            damping *= _DAMPING_DOWN
+            losses.append(cost / m)
+            line = f"{label} iter {n_iter:4d}  loss {cost / m:.6e}"
+            if validation_loss is not None:
+                val = validation_loss(theta)
+                val_losses.append(val)
+                line += f"  validation {val:.6e}"
+                if val < best_val:
+                    best_theta, best_val, best_iter = theta.copy(), val, n_iter
+            if verbose:
+                print(line + f"  damping {damping:.3e}", flush=True)
+            if decrease < tol:
+                converged = True
+                break
+    if validation_loss is None:
+        best_theta, best_iter = theta, n_iter
+    if not converged:
+        warnings.warn(
+            f"{label}: the iteration limit max_iter={max_iter} was reached before "
+            "the cost stopped decreasing; increase max_iter to refine the fit.",
+            ConvergenceWarning,
+            stacklevel=3,
+        )
+    return LMResult(
+        theta=best_theta,
+        loss_history=np.asarray(losses),
+        validation_history=None if val_losses is None else np.asarray(val_losses),
+        best_iter=best_iter,
+        n_iter=n_iter,
+        converged=converged,
+    )
