@@ -1,0 +1,316 @@
+"""Nonparametric estimates of the Best Linear Approximation.
+
+Two estimators of the frequency response function (FRF) and its variance:
+
+- the robust method for periodic excitations (Pintelon & Schoukens, *System
+  Identification: A Frequency Domain Approach*, 2nd ed., 2012, ch. 3-4): the
+  spectra are averaged over the periods of every realization, one FRF is formed
+  per realization (per group of ``n_inputs`` realizations for MIMO), and the
+  sample variances over periods and over realizations give the noise variance
+  and the total (noise plus nonlinear distortion) variance;
+- the Local Polynomial Method (LPM, ibid. ch. 7) for a non-periodic record with
+  a transient: around every frequency bin, the FRF and the transient term are
+  low-degree polynomials of the bin offset, fitted by least squares over the
+  neighbouring bins; the residual gives the variance.
+
+Frequencies are in cycles per sample. Spectra use the DFT scaled by
+``1 / sqrt(N)``; the FRF does not depend on the scaling.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Relative input power (with respect to the strongest bin) below which a bin
+# is considered not excited: periodic multisines leave their unexcited lines
+# hundreds of dB down, while every excited line of a practical multisine is
+# well within this range.
+EXCITATION_THRESHOLD = 1e-8
+# For a non-periodic record every bin holds some input power (leakage), so the
+# LPM keeps the bins whose window holds at least this fraction of the largest
+# window input power (-30 dB): the leakage of a band-limited input lies below,
+# while the windows of a broadband random input stay within a few dB.
+LPM_POWER_THRESHOLD = 1e-3
+# Singular values of an LPM regression below this fraction of the largest are
+# discarded, so that a window without input power gives a finite, uninformative
+# estimate (with a large variance) rather than a division by zero.
+_LPM_RCOND = 1e-10
+
+
+@dataclass
+class FRFEstimate:
+    """Nonparametric FRF with its variances.
+
+    Attributes
+    ----------
+    frequencies : ndarray of shape (n_freq,)
+        Frequencies in cycles per sample, increasing.
+    frf : ndarray of shape (n_freq, n_outputs, n_inputs), complex
+        Estimated FRF.
+    noise_variance : ndarray of shape (n_freq, n_outputs, n_inputs) or None
+        Variance of ``frf`` due to the measurement noise (None when it cannot
+        be estimated).
+    total_variance : ndarray of shape (n_freq, n_outputs, n_inputs) or None
+        Variance of ``frf`` due to the noise and the nonlinear distortions
+        (None when it cannot be estimated).
+    """
+
+    frequencies: np.ndarray
+    frf: np.ndarray
+    noise_variance: np.ndarray | None
+    total_variance: np.ndarray | None
+
+
+def _band_mask(bins, n_dft, max_frequency):
+    if max_frequency is None:
+        return np.ones(bins.shape, dtype=bool)
+    return bins / n_dft <= max_frequency
+
+
+def _sample_variance(values, axis):
+    """Variance of the mean of complex samples along ``axis`` (unbiased)."""
+    count = values.shape[axis]
+    spread = values - values.mean(axis=axis, keepdims=True)
+    return np.sum(np.abs(spread) ** 2, axis=axis) / ((count - 1) * count)
+
+
+def _block_frf(Y, U):
+    """FRF ``Y U^-1`` of square input blocks.
+
+    ``U`` has shape (..., n_inputs, n_inputs) and ``Y`` (..., n_outputs,
+    n_inputs), the columns being the experiments of one block.
+    """
+    # G U = Y  <=>  U^T G^T = Y^T
+    return np.swapaxes(np.linalg.solve(np.swapaxes(U, -1, -2), np.swapaxes(Y, -1, -2)),
+                       -1, -2)
+
+
+def robust_frf(U, Y, starts, period, *, n_transient=0, max_frequency=None):
+    """Robust-method FRF of periodic records.
+
+    Parameters
+    ----------
+    U : ndarray of shape (n_samples, n_inputs)
+        Input signal.
+    Y : ndarray of shape (n_samples, n_outputs)
+        Output signal.
+    starts : ndarray of shape (n_sequences + 1,)
+        Sequence boundaries; every sequence is one realization holding the same
+        whole number of periods.
+    period : int
+        Samples per period.
+    n_transient : int, default=0
+        The first ``ceil(n_transient / period)`` periods of every sequence are
+        dropped (they hold the transient).
+    max_frequency : float, default=None
+        Highest frequency used, in cycles per sample.
+
+    Returns
+    -------
+    estimate : FRFEstimate
+        On the excited lines. The noise variance needs at least two periods,
+        the total variance at least two groups of ``n_inputs`` realizations.
+    """
+    n_u, n_y = U.shape[1], Y.shape[1]
+    lengths = np.diff(starts)
+    if np.any(lengths % period):
+        bad = int(lengths[np.flatnonzero(lengths % period)[0]])
+        raise ValueError(
+            f"period={period} does not divide the sequence length {bad}: with "
+            "`period` set, every sequence must hold a whole number of periods."
+        )
+    if np.any(lengths != lengths[0]):
+        raise ValueError(
+            "With `period` set, all sequences (realizations) must hold the same "
+            f"number of periods; got sequence lengths {sorted(set(lengths.tolist()))}."
+        )
+    n_periods = int(lengths[0] // period)
+    n_drop = -(-n_transient // period)
+    if n_periods - n_drop < 1:
+        raise ValueError(
+            f"n_transient={n_transient} drops {n_drop} of the {n_periods} period(s) "
+            "of each sequence: no period is left to estimate the FRF."
+        )
+    n_real = len(starts) - 1
+    if n_real < n_u:
+        raise ValueError(
+            f"The robust method needs at least n_inputs={n_u} realizations "
+            f"(sequences) to separate the inputs; got {n_real}."
+        )
+    if period < 3:
+        raise ValueError(f"period must be at least 3 samples, got {period}.")
+    # (realization, period, time, channel), the transient periods dropped
+    shape = (n_real, n_periods, period)
+    Ur = U.reshape(shape + (n_u,))[:, n_drop:]
+    Yr = Y.reshape(shape + (n_y,))[:, n_drop:]
+    Uf = np.fft.rfft(Ur, axis=2) / np.sqrt(period)
+    Yf = np.fft.rfft(Yr, axis=2) / np.sqrt(period)
+    bins = np.arange(Uf.shape[2])
+    power = np.sum(np.abs(Uf.mean(axis=1)) ** 2, axis=(0, 2))
+    keep = (bins > 0) & _band_mask(bins, period, max_frequency)
+    keep &= power > EXCITATION_THRESHOLD * power[keep].max(initial=0.0)
+    if not keep.any():
+        raise ValueError("The input has no power on any usable frequency line.")
+    Uf, Yf = Uf[:, :, keep], Yf[:, :, keep]
+
+    n_blocks = n_real // n_u
+    used = n_blocks * n_u
+    # (block, period, freq, channel, experiment in block)
+    Ub = Uf[:used].reshape(n_blocks, n_u, *Uf.shape[1:]).transpose(0, 2, 3, 4, 1)
+    Yb = Yf[:used].reshape(n_blocks, n_u, *Yf.shape[1:]).transpose(0, 2, 3, 4, 1)
+    G_blocks = _block_frf(Yb.mean(axis=1), Ub.mean(axis=1))
+    G = G_blocks.mean(axis=0)
+    total = _sample_variance(G_blocks, axis=0) if n_blocks >= 2 else None
+    noise = None
+    if Ub.shape[1] >= 2:
+        # Nonlinear distortions repeat in every period, so the period-to-period
+        # spread of the FRF is due to the noise only.
+        noise = _sample_variance(_block_frf(Yb, Ub), axis=1).mean(axis=0) / n_blocks
+    return FRFEstimate(bins[keep] / period, G, noise, total)
+
+
+def lpm_window(n_inputs, order, n_bins, bandwidth=None):
+    """Width and polynomial degree of the LPM window.
+
+    With ``p = (order + 1) (n_inputs + 1)`` unknowns per output, the default
+    half-width ``ceil(p / 2) + 1`` leaves three or four degrees of freedom for
+    the noise variance (Pintelon & Schoukens, 2012, §7.2). When the record has
+    too few bins for that window, the window shrinks to one degree of freedom
+    and then the degree is lowered; a record too short even for degree 0 is
+    treated as one window over all its bins (a minimum-norm fit without a
+    variance estimate), which is only good for very short records.
+
+    Parameters
+    ----------
+    n_inputs : int
+        Number of inputs.
+    order : int
+        Requested polynomial degree.
+    n_bins : int
+        Number of usable bins of the record.
+    bandwidth : int, default=None
+        Requested half-width; the degree is lowered if the window cannot hold
+        the polynomials.
+
+    Returns
+    -------
+    width, order : int
+        Number of bins of a window, and the degree used.
+    """
+    for degree in range(order, -1, -1):
+        n_unknown = (degree + 1) * (n_inputs + 1)
+        smallest = -(-n_unknown // 2)
+        if bandwidth is not None:
+            candidates = [bandwidth] if bandwidth >= smallest else []
+        else:
+            candidates = [smallest + 1, smallest]
+        for half in candidates:
+            if 2 * half + 1 <= n_bins:
+                return 2 * half + 1, degree
+    if bandwidth is not None or n_bins < 1:
+        raise ValueError(
+            f"The record is too short for the Local Polynomial Method: {n_bins} "
+            f"frequency bin(s) cannot hold a window of half-width {bandwidth} for "
+            f"{n_inputs} input(s)."
+        )
+    return n_bins, 0
+
+
+def _lpm_record(U, Y, order, bandwidth, max_frequency):
+    """LPM on one record: (frequencies, FRF, variance or None)."""
+    n, n_u = U.shape
+    n_bins = (n - 1) // 2  # positive bins below Nyquist
+    width, order = lpm_window(n_u, order, n_bins, bandwidth)
+    Uf = np.fft.fft(U, axis=0)[1 : n_bins + 1] / np.sqrt(n)
+    Yf = np.fft.fft(Y, axis=0)[1 : n_bins + 1] / np.sqrt(n)
+    half = width // 2
+    # window of bin k: the `width` bins closest to it that lie in 1..n_bins
+    first = np.clip(np.arange(n_bins) - half, 0, n_bins - width)
+    index = first[:, None] + np.arange(width)
+    offset = (index - np.arange(n_bins)[:, None]) / max(half, 1)
+    powers = offset[..., None] ** np.arange(order + 1)  # (bin, width, order+1)
+    Uw = Uf[index]  # (bin, width, n_u)
+    # regressors: [r^s u_i] for every s and i, then [r^s] for the transient
+    K = np.concatenate(
+        [(powers[..., :, None] * Uw[..., None, :]).reshape(n_bins, width, -1),
+         powers.astype(complex)],
+        axis=2,
+    )
+    Uk, s, Vh = np.linalg.svd(K, full_matrices=False)
+    inv_s = np.where(s > _LPM_RCOND * s[:, :1], 1.0 / np.where(s > 0, s, 1.0), 0.0)
+    rank = np.sum(inv_s > 0, axis=1)
+    # theta = pinv(K) Y_window ; the first n_u unknowns are the FRF at the bin
+    Yw = Yf[index]  # (bin, width, n_y)
+    coef = np.conj(Vh).transpose(0, 2, 1) @ (
+        inv_s[..., None] * (np.conj(Uk).transpose(0, 2, 1) @ Yw)
+    )
+    residual = Yw - K @ coef
+    dof = width - rank
+    noise_var = np.sum(np.abs(residual) ** 2, axis=1) / np.maximum(dof, 1)[:, None]
+    # diag of (K^H K)^+ for the FRF unknowns
+    gain = np.sum(np.abs(np.conj(Vh[:, :, :n_u])) ** 2 * inv_s[..., None] ** 2, axis=1)
+    G = coef[:, :n_u, :].transpose(0, 2, 1)  # (bin, n_y, n_u)
+    var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
+    window_power = np.sum(np.abs(Uw) ** 2, axis=(1, 2))
+    bins = np.arange(1, n_bins + 1)
+    keep = _band_mask(bins, n, max_frequency)
+    keep &= window_power > LPM_POWER_THRESHOLD * window_power[keep].max(initial=0.0)
+    return bins[keep] / n, G[keep], None if var is None else var[keep]
+
+
+def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
+    """Local Polynomial Method FRF of non-periodic records.
+
+    Parameters
+    ----------
+    U : ndarray of shape (n_samples, n_inputs)
+        Input signal.
+    Y : ndarray of shape (n_samples, n_outputs)
+        Output signal.
+    starts : ndarray of shape (n_sequences + 1,)
+        Sequence boundaries; each sequence is one record, processed alone.
+    order : int, default=2
+        Degree of the local polynomials of the FRF and the transient; lowered
+        automatically on records too short for it.
+    bandwidth : int, default=None
+        Half-width n of the window of ``2 n + 1`` bins; ``None`` chooses the
+        window leaving three or four degrees of freedom (see :func:`lpm_window`).
+    n_transient : int, default=0
+        Samples dropped at the start of every record.
+    max_frequency : float, default=None
+        Highest frequency used, in cycles per sample.
+
+    Returns
+    -------
+    estimate : FRFEstimate
+        On the bins below ``max_frequency`` whose window holds input power
+        (at least ``LPM_POWER_THRESHOLD`` times the largest window power).
+        The LPM cannot separate noise from nonlinear distortion on a
+        non-periodic record: both variances are the same total variance.
+        Records of different lengths contribute their own bins; estimates at
+        equal frequencies are combined by inverse-variance weighting.
+    """
+    parts = [
+        _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
+                    bandwidth, max_frequency)
+        for begin, end in zip(starts[:-1], starts[1:])
+    ]
+    freqs = np.concatenate([p[0] for p in parts])
+    if freqs.size == 0:
+        raise ValueError("The input has no power on any usable frequency bin.")
+    G = np.concatenate([p[1] for p in parts])
+    if any(p[2] is None for p in parts):
+        var = None
+        weight = np.ones(G.shape)
+    else:
+        var = np.concatenate([p[2] for p in parts])
+        weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
+    unique, group = np.unique(freqs, return_inverse=True)
+    if unique.size < freqs.size:
+        wsum = np.zeros((unique.size,) + G.shape[1:])
+        np.add.at(wsum, group, weight)
+        Gsum = np.zeros((unique.size,) + G.shape[1:], dtype=complex)
+        np.add.at(Gsum, group, weight * G)
+        G = Gsum / wsum
+        var = None if var is None else 1.0 / wsum
+    return FRFEstimate(unique, G, var, var)

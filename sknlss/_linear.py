@@ -1,0 +1,362 @@
+"""Parametric linear state-space models from frequency response data.
+
+- :func:`frf_subspace`: the frequency-domain subspace method (McKelvey, Akçay,
+  Ljung, IEEE TAC 1996) with the noise weighting of Pintelon (Automatica 2002),
+  for FRF samples on any set of frequencies;
+- :func:`refine_frf`: weighted nonlinear least squares of the state-space FRF on
+  the nonparametric FRF (the criterion of paper eq. 9, in a state-space rather
+  than a polynomial parametrisation, which stays well conditioned for MIMO and
+  high orders), solved by the shared Levenberg-Marquardt optimiser;
+- :func:`balanced_realization`: square-root balancing of a stable discrete-time
+  model;
+- :func:`simulate_linear` and :func:`estimate_initial_state`: compiled free-run
+  simulation and the least-squares initial state.
+
+Frequencies are in cycles per sample: ``z = exp(2j pi f)``.
+"""
+
+import warnings
+
+import numpy as np
+from numba import njit
+from scipy.linalg import solve_discrete_lyapunov
+from sklearn.exceptions import ConvergenceWarning
+
+from ._base import DIVERGENCE_BOUND
+from ._optimize import LMResult, levenberg_marquardt
+
+# Spectral radius allowed for a fitted BLA: the model must be simulated, so the
+# refinement rejects steps that leave the unit disc with this margin.
+_MAX_SPECTRAL_RADIUS = 1.0 - 1e-9
+# Levenberg-Marquardt steps between two re-balancings of the model.
+_ROUND_ITER = 20
+
+
+def ss_frf(A, B, C, D, frequencies):
+    """FRF ``C (zI - A)^-1 B + D`` of a discrete-time model.
+
+    Parameters
+    ----------
+    A, B, C, D : ndarray
+        State-space matrices of shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
+    frequencies : ndarray of shape (n_freq,)
+        Frequencies in cycles per sample.
+
+    Returns
+    -------
+    frf : ndarray of shape (n_freq, n_y, n_u), complex
+    """
+    z = np.exp(2j * np.pi * np.asarray(frequencies))
+    n = A.shape[0]
+    resolvent_B = np.linalg.solve(z[:, None, None] * np.eye(n) - A, B.astype(complex))
+    return C @ resolvent_B + D
+
+
+def _frequency_weights(weight):
+    """One positive weight per frequency from element weights (n_freq, n_y, n_u)."""
+    return np.sqrt(np.mean(weight**2, axis=(1, 2)))
+
+
+def _fit_bd(A, C, frequencies, G, weight):
+    """Weighted linear least squares of B and D for fixed A and C."""
+    n, n_y, n_u = A.shape[0], C.shape[0], G.shape[2]
+    z = np.exp(2j * np.pi * frequencies)
+    CX = C @ np.linalg.inv(z[:, None, None] * np.eye(n) - A)  # (F, n_y, n)
+    regressor = np.concatenate(
+        [CX, np.broadcast_to(np.eye(n_y), (len(z), n_y, n_y)).astype(complex)], axis=2
+    )
+    B, D = np.empty((n, n_u)), np.empty((n_y, n_u))
+    for j in range(n_u):
+        w = weight[:, :, j, None]
+        lhs = (w * regressor).reshape(-1, n + n_y)
+        rhs = (weight[:, :, j] * G[:, :, j]).ravel()
+        sol = np.linalg.lstsq(np.vstack([lhs.real, lhs.imag]),
+                              np.concatenate([rhs.real, rhs.imag]), rcond=None)[0]
+        B[:, j], D[:, j] = sol[:n], sol[n:]
+    return B, D
+
+
+def n_block_rows(n_states, n_freq, n_inputs):
+    """Block rows ``q`` of the subspace method for ``n_freq`` frequencies.
+
+    ``q = 2 n + 1`` where the data allow it, at least ``n + 1``; the projection
+    must leave ``2 n_freq n_u - q n_u >= n`` columns.
+    """
+    q = min(2 * n_states + 1, (2 * n_freq * n_inputs - n_states) // n_inputs)
+    if q < n_states + 1:
+        raise ValueError(
+            f"n_states={n_states} is too large for {n_freq} frequency line(s) "
+            f"with {n_inputs} input(s): the frequency-domain subspace method needs "
+            f"at least {-(-(n_states * (n_inputs + 1)) // (2 * n_inputs))} lines."
+        )
+    return q
+
+
+def frf_subspace(frequencies, G, weight, n_states):
+    """Frequency-domain subspace estimate of (A, B, C, D) from FRF data.
+
+    Parameters
+    ----------
+    frequencies : ndarray of shape (n_freq,)
+        Frequencies in cycles per sample.
+    G : ndarray of shape (n_freq, n_y, n_u), complex
+        FRF samples.
+    weight : ndarray of shape (n_freq, n_y, n_u)
+        Inverse standard deviation of each FRF sample.
+    n_states : int
+        Model order.
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+    """
+    n_freq, n_y, n_u = G.shape
+    q = n_block_rows(n_states, n_freq, n_u)
+    z = np.exp(2j * np.pi * frequencies)
+    w = _frequency_weights(weight)
+    Wz = z[None, :] ** np.arange(q)[:, None]  # (q, F)
+    # column block k: [G_k; z G_k; ...] and [I; z I; ...], scaled by w_k; scaling
+    # a column of both data matrices keeps the subspace equation exact
+    Yb = (Wz[:, None, :, None] * (w[:, None, None] * G).transpose(1, 0, 2)[None])
+    Yb = Yb.reshape(q * n_y, n_freq * n_u)
+    Ub = (Wz[:, None, :, None] * (w[:, None, None] * np.eye(n_u)[None]).transpose(1, 0, 2)[None])
+    Ub = Ub.reshape(q * n_u, n_freq * n_u)
+    data = np.vstack([np.hstack([Ub.real, Ub.imag]), np.hstack([Yb.real, Yb.imag])])
+    R = np.linalg.qr(data.T, mode="r").T
+    R22 = R[q * n_u :, q * n_u :]
+    # Pintelon (2002): whiten the rows by the covariance of the weighted noise,
+    # Re(sum_k W_k W_k^H) (x) I (each weighted sample has unit variance)
+    # (a clipped eigen-factor: with frequencies crowded near DC the rows of the
+    # data matrix are nearly collinear and the covariance is ill-conditioned)
+    vals, vecs = np.linalg.eigh(np.kron(np.real(Wz @ Wz.conj().T), np.eye(n_y)))
+    root = np.sqrt(np.clip(vals, 1e-12 * vals[-1], None))
+    left = np.linalg.svd((vecs / root).T @ R22, full_matrices=False)[0]
+    O = (vecs * root) @ left[:, :n_states]
+    C = O[:n_y]
+    A = np.linalg.lstsq(O[:-n_y], O[n_y:], rcond=None)[0]
+    A = stabilize(A)
+    B, D = _fit_bd(A, C, frequencies, G, weight)
+    return A, B, C, D
+
+
+def stabilize(A):
+    """Reflect the eigenvalues outside the unit disc into it (``1 / conj(p)``)."""
+    poles, vectors = np.linalg.eig(A)
+    unstable = np.abs(poles) >= _MAX_SPECTRAL_RADIUS
+    if not unstable.any():
+        return A
+    poles = np.where(unstable, 1.0 / np.conj(poles), poles)
+    # keep reflected poles strictly inside (a pole exactly on the circle)
+    poles = np.where(np.abs(poles) >= _MAX_SPECTRAL_RADIUS,
+                     poles / np.abs(poles) * (1.0 - 1e-3), poles)
+    return np.real(vectors @ np.diag(poles) @ np.linalg.inv(vectors))
+
+
+def _unpack(theta, n, n_u, n_y):
+    sizes = np.cumsum([n * n, n * n_u, n_y * n])
+    A, B, C, D = np.split(theta, sizes)
+    return A.reshape(n, n), B.reshape(n, n_u), C.reshape(n_y, n), D.reshape(n_y, n_u)
+
+
+def refine_frf(A, B, C, D, frequencies, G, weight, *, max_iter=100, tol=1e-10,
+               verbose=0):
+    """Weighted nonlinear least squares of the model FRF on ``G``.
+
+    Minimises ``sum |weight (G_model - G)|^2`` over all entries of (A, B, C, D)
+    by Levenberg-Marquardt, dropping the ``n^2`` directions of the similarity
+    transform and rejecting steps whose A is not stable. The iterations run
+    in rounds of at most ``_ROUND_ITER`` steps, the model being re-balanced
+    between rounds: the similarity freedom otherwise lets the realization
+    drift into poorly conditioned coordinates, where the steps become tiny
+    (with poles close to 1, hundreds of iterations instead of tens).
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+    result : LMResult
+    """
+    n, n_u, n_y = B.shape[0], B.shape[1], C.shape[0]
+    z = np.exp(2j * np.pi * frequencies)
+    eye = np.eye(n)
+    w = weight
+
+    def residual(theta, jacobian):
+        A_, B_, C_, D_ = _unpack(theta, n, n_u, n_y)
+        if np.max(np.abs(np.linalg.eigvals(A_))) >= _MAX_SPECTRAL_RADIUS:
+            return None, None
+        X = np.linalg.inv(z[:, None, None] * eye - A_)  # (F, n, n)
+        P = C_ @ X  # (F, n_y, n)
+        Q = X @ B_  # (F, n, n_u)
+        err = w * (C_ @ Q + D_ - G)
+        r = np.concatenate([err.real.ravel(), err.imag.ravel()])
+        if not jacobian:
+            return r, None
+        F = len(z)
+        dA = np.einsum("fia,fbj->fijab", P, Q).reshape(F, n_y, n_u, n * n)
+        dB = np.einsum("fia,jb->fijab", P, np.eye(n_u)).reshape(F, n_y, n_u, n * n_u)
+        dC = np.einsum("ia,fbj->fijab", np.eye(n_y), Q).reshape(F, n_y, n_u, n_y * n)
+        dD = np.broadcast_to(np.eye(n_y * n_u).reshape(1, n_y, n_u, n_y * n_u),
+                             (F, n_y, n_u, n_y * n_u))
+        J = w[..., None] * np.concatenate([dA, dB, dC, dD], axis=3)
+        J = J.reshape(-1, J.shape[-1])
+        return r, np.vstack([J.real, J.imag])
+
+    losses, n_iter, converged = [], 0, False
+    while n_iter < max_iter:
+        theta = np.concatenate([A.ravel(), B.ravel(), C.ravel(), D.ravel()])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            result = levenberg_marquardt(residual, theta, max_iter=min(
+                _ROUND_ITER, max_iter - n_iter), tol=tol, n_drop=n * n,
+                verbose=verbose, label="BLA")
+        losses.append(result.loss_history[1:] if losses else result.loss_history)
+        n_iter += result.n_iter
+        A, B, C, D = _unpack(result.theta, n, n_u, n_y)
+        if result.converged:
+            converged = True
+            break
+        A, B, C, D = balanced_realization(A, B, C, D)[:4]
+    if not converged:
+        warnings.warn(
+            f"BLA: the iteration limit max_iter={max_iter} was reached before the "
+            "cost stopped decreasing; increase max_iter to refine the fit.",
+            ConvergenceWarning,
+            stacklevel=3,
+        )
+    loss_history = np.concatenate(losses) if losses else np.empty(0)
+    result = LMResult(theta=np.concatenate([A.ravel(), B.ravel(), C.ravel(), D.ravel()]),
+                      loss_history=loss_history, validation_history=None,
+                      best_iter=n_iter, n_iter=n_iter, converged=converged)
+    return A, B, C, D, result
+
+
+def _psd_sqrt(M):
+    """A factor L with L L^T = M for a symmetric positive semi-definite M."""
+    vals, vecs = np.linalg.eigh((M + M.T) / 2)
+    return vecs * np.sqrt(np.clip(vals, 0.0, None))
+
+
+def balanced_realization(A, B, C, D):
+    """Square-root balanced realization of a stable discrete-time model.
+
+    The controllability and observability Gramians of the result are equal and
+    diagonal, with decreasing Hankel singular values; the sign of each state is
+    fixed so that the first nonzero entry of its column of C (or of its row of
+    B) is positive. A model that is unstable or not minimal is returned as is.
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+    hankel_singular_values : ndarray of shape (n,) or None
+    """
+    if np.max(np.abs(np.linalg.eigvals(A)), initial=0.0) >= 1.0:
+        return A, B, C, D, None
+    Lc = _psd_sqrt(solve_discrete_lyapunov(A, B @ B.T))
+    Lo = _psd_sqrt(solve_discrete_lyapunov(A.T, C.T @ C))
+    U, s, Vt = np.linalg.svd(Lo.T @ Lc)
+    if s.size == 0 or s[-1] <= 1e-12 * s[0]:
+        return A, B, C, D, None
+    root = np.sqrt(s)
+    T = (Lc @ Vt.T) / root
+    T_inv = (U.T @ Lo.T) / root[:, None]
+    Ab, Bb, Cb = T_inv @ A @ T, T_inv @ B, C @ T
+    lead = np.vstack([Cb, Bb.T])
+    idx = np.argmax(np.abs(lead) > 1e-12 * np.abs(lead).max(axis=0), axis=0)
+    sign = np.sign(lead[idx, np.arange(lead.shape[1])])
+    sign[sign == 0] = 1.0
+    return sign[:, None] * Ab * sign, sign[:, None] * Bb, Cb * sign, D.copy(), s
+
+
+@njit(cache=True)
+def _simulate_kernel(A, B, C, D, U, starts, x0, bound):
+    n_samples = U.shape[0]
+    n = A.shape[0]
+    n_y = C.shape[0]
+    Y = np.full((n_samples, n_y), np.nan)
+    X = np.full((n_samples, n), np.nan)
+    diverged = False
+    for k in range(starts.shape[0] - 1):
+        x = x0[k].copy()
+        for t in range(starts[k], starts[k + 1]):
+            ok = True
+            for i in range(n):
+                if not np.abs(x[i]) <= bound:
+                    ok = False
+            if not ok:
+                diverged = True
+                break
+            X[t] = x
+            Y[t] = C @ x + D @ U[t]
+            x = A @ x + B @ U[t]
+    return Y, X, diverged
+
+
+def simulate_linear(A, B, C, D, U, starts, x0):
+    """Free-run simulation of a linear model over the sequences.
+
+    Parameters
+    ----------
+    A, B, C, D : ndarray
+        State-space matrices.
+    U : ndarray of shape (n_samples, n_u)
+        Input.
+    starts : ndarray of shape (n_sequences + 1,)
+        Sequence boundaries.
+    x0 : ndarray of shape (n_sequences, n)
+        Initial state of every sequence.
+
+    Returns
+    -------
+    Y : ndarray of shape (n_samples, n_y)
+    states : ndarray of shape (n_samples, n)
+    diverged : bool
+    """
+    f = np.ascontiguousarray
+    return _simulate_kernel(f(A, dtype=np.float64), f(B, dtype=np.float64),
+                            f(C, dtype=np.float64), f(D, dtype=np.float64),
+                            f(U, dtype=np.float64), f(starts, dtype=np.int64),
+                            f(x0, dtype=np.float64), DIVERGENCE_BOUND)
+
+
+def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
+    """Least-squares initial state shared by all sequences, with an output offset.
+
+    The output is linear in the initial state: ``y = y_forced + Phi x0 + d``,
+    where column ``i`` of ``Phi`` is the zero-input response from ``e_i``. The
+    constant ``d`` is estimated with it because the mean of a record that does
+    not start in steady state, used as the output offset, contains the mean of
+    the transient: without ``d`` the free response would be counted twice.
+
+    Parameters
+    ----------
+    A, B, C, D : ndarray
+        State-space matrices.
+    U : ndarray of shape (n_samples, n_u)
+        Input.
+    Y : ndarray of shape (n_samples, n_y)
+        Measured output.
+    starts : ndarray of shape (n_sequences + 1,)
+        Sequence boundaries; every sequence starts from the same state.
+    mask : ndarray of bool of shape (n_samples,)
+        Rows entering the least-squares cost.
+
+    Returns
+    -------
+    x0 : ndarray of shape (n,)
+    offset : ndarray of shape (n_y,)
+        Output offset ``d``.
+    """
+    n, n_y, n_seq = A.shape[0], C.shape[0], len(starts) - 1
+    zeros = np.zeros((n_seq, n))
+    forced = simulate_linear(A, B, C, D, U, starts, zeros)[0]
+    no_input = np.zeros_like(U)
+    columns = []
+    for i in range(n):
+        e = zeros.copy()
+        e[:, i] = 1.0
+        columns.append(simulate_linear(A, B, C, D, no_input, starts, e)[0][mask].ravel())
+    n_rows = int(mask.sum())
+    constant = np.tile(np.eye(n_y), (n_rows, 1))
+    Phi = np.column_stack(columns + [constant])
+    sol = np.linalg.lstsq(Phi, (Y - forced)[mask].ravel(), rcond=None)[0]
+    return sol[:n], sol[n:]
