@@ -8,7 +8,8 @@ sequence) and ``sequence_id``.
 """
 
 import numpy as np
-from sklearn.metrics import make_scorer
+from sklearn.utils.metadata_routing import MetadataRequest, _MetadataRequester
+from sklearn.utils.metadata_routing import _routing_enabled
 
 from ._base import sequence_bounds, transient_mask
 
@@ -158,16 +159,59 @@ _METRICS = {
 }
 
 
-def _finite_metric(metric, greater_is_better):
-    """Wrap ``metric`` so that a divergent (non-finite) simulation scores worst."""
+class _SimulationScorer(_MetadataRequester):
+    """Scorer that simulates each evaluated sequence and skips its transient.
 
-    def score(y_true, y_pred, **kwargs):
+    Unlike a scorer made by :func:`sklearn.metrics.make_scorer`, it passes a
+    routed ``sequence_id`` to ``predict`` as well as to the metric, so that each
+    sequence of a test fold is simulated from its own initial state.
+    """
+
+    def __init__(self, metric, *, n_transient):
+        self.metric = metric
+        self.n_transient = n_transient
+
+    def __call__(self, estimator, X, y_true, sequence_id=None):
+        function, greater_is_better = _METRICS[self.metric]
+        if sequence_id is None:
+            y_pred = estimator.predict(X)
+        else:
+            y_pred = estimator.predict(X, sequence_id=sequence_id)
+        sign = 1.0 if greater_is_better else -1.0
         if not np.all(np.isfinite(y_pred)):
-            return -np.inf if greater_is_better else np.inf
-        return metric(y_true, y_pred, **kwargs)
+            return -np.inf
+        value = function(
+            y_true, y_pred, n_transient=self.n_transient, sequence_id=sequence_id
+        )
+        return sign * value
 
-    score.__name__ = metric.__name__
-    return score
+    def set_score_request(self, *, sequence_id=True):
+        """Request ``sequence_id`` from the caller (metadata routing).
+
+        Parameters
+        ----------
+        sequence_id : bool, str or None, default=True
+            Whether the scorer receives the routed ``sequence_id`` (or the name
+            of the metadata to use as such).
+
+        Returns
+        -------
+        self : object
+            The scorer.
+        """
+        if not _routing_enabled():
+            raise RuntimeError(
+                "set_score_request needs metadata routing: call "
+                "sklearn.set_config(enable_metadata_routing=True) first."
+            )
+        self._metadata_request = MetadataRequest(owner=self)
+        self._metadata_request.score.add_request(param="sequence_id", alias=sequence_id)
+        return self
+
+    def __repr__(self):
+        return (
+            f"make_transient_scorer({self.metric!r}, n_transient={self.n_transient})"
+        )
 
 
 def make_transient_scorer(metric="rms", *, n_transient=0):
@@ -177,28 +221,33 @@ def make_transient_scorer(metric="rms", *, n_transient=0):
     ----------
     metric : {"rms", "nrmse", "fit"}, default="rms"
         Metric of the simulated output. Errors are negated, so that greater is
-        better as scikit-learn expects.
+        better as scikit-learn expects; a divergent simulation scores ``-inf``.
     n_transient : int, default=0
-        Samples skipped at the start of each evaluated fold; the state of a
+        Samples skipped at the start of each evaluated sequence; the state of a
         model started from zero needs a few samples to settle.
 
     Returns
     -------
     scorer : callable
-        ``scorer(estimator, X, y)``.
+        ``scorer(estimator, X, y, sequence_id=None)``. With metadata routing
+        enabled, ``scorer.set_score_request(sequence_id=True)`` makes a search
+        route ``sequence_id`` to it, and the scorer passes it on to ``predict``.
 
     Examples
     --------
+    >>> import numpy as np
+    >>> from sknlss import BLAEstimator
     >>> from sknlss.metrics import make_transient_scorer
-    >>> scorer = make_transient_scorer("rms", n_transient=50)
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal((400, 1))
+    >>> y = np.convolve(u[:, 0], [0.0, 1.0, 0.5, 0.25], mode="full")[:400]
+    >>> scorer = make_transient_scorer("rms", n_transient=20)
+    >>> model = BLAEstimator(n_states=2).fit(u, y)
+    >>> bool(scorer(model, u, y) <= 0.0)
+    True
     """
     if metric not in _METRICS:
         raise ValueError(f"metric must be one of {sorted(_METRICS)}, got {metric!r}.")
     if n_transient < 0:
         raise ValueError(f"n_transient must be non-negative, got {n_transient}.")
-    function, greater_is_better = _METRICS[metric]
-    return make_scorer(
-        _finite_metric(function, greater_is_better),
-        greater_is_better=greater_is_better,
-        n_transient=n_transient,
-    )
+    return _SimulationScorer(metric, n_transient=n_transient)

@@ -1,0 +1,271 @@
+import warnings
+
+import numpy as np
+import pytest
+from sklearn.metrics import r2_score
+
+from sknlss._base import (
+    DIVERGENCE_BOUND,
+    SimulationDivergedWarning,
+    _BaseStateSpace,
+    holdout_masks,
+    sequence_bounds,
+    transient_mask,
+)
+
+
+# ------------------------------------------------------------ row helpers
+def test_sequence_bounds():
+    np.testing.assert_array_equal(sequence_bounds(None, 5), [0, 5])
+    np.testing.assert_array_equal(sequence_bounds([3, 3, 1, 1, 1, 7], 6), [0, 2, 5, 6])
+    np.testing.assert_array_equal(sequence_bounds(np.array([0.0, 0.0, 1.0]), 3), [0, 2, 3])
+
+
+@pytest.mark.parametrize(
+    "sequence_id, match",
+    [
+        ([0, 0, 1], "one label per sample"),
+        (np.zeros((4, 1)), "one label per sample"),
+        ([0, 0, 1, 0], "contiguous"),
+        ([0.0, 0.5, 1.0, 1.0], "integer labels"),
+        (["a", "a", "b", "b"], "integer labels"),
+        ([0.0, np.nan, 1.0, 1.0], "integer labels"),
+    ],
+)
+def test_sequence_bounds_errors(sequence_id, match):
+    with pytest.raises(ValueError, match=match):
+        sequence_bounds(sequence_id, 4)
+
+
+def test_transient_mask():
+    starts = np.array([0, 3, 5, 10])
+    np.testing.assert_array_equal(
+        transient_mask(starts, 2),
+        [False, False, True, False, False, False, False, True, True, True],
+    )
+    assert transient_mask(starts, 0).all()
+
+
+def test_holdout_masks():
+    starts = np.array([0, 10, 20])
+    fit, validation = holdout_masks(starts, 2, 0.3)
+    expected_fit = np.zeros(20, dtype=bool)
+    expected_fit[2:7] = expected_fit[12:17] = True
+    expected_validation = np.zeros(20, dtype=bool)
+    expected_validation[7:10] = expected_validation[17:20] = True
+    np.testing.assert_array_equal(fit, expected_fit)
+    np.testing.assert_array_equal(validation, expected_validation)
+    fit, validation = holdout_masks(starts, 1, 0.0)
+    assert not validation.any() and fit.sum() == 18
+    with pytest.raises(ValueError, match="leave no sample"):
+        holdout_masks(starts, 10, 0.0)
+
+
+# ------------------------------------------------------- the base contract
+class _FirstOrder(_BaseStateSpace):
+    """x(t+1) = pole x(t) + sum(u(t)); y_j(t) = x(t) + gain_j sum(u(t)), normalised units."""
+
+    _parameter_constraints = {**_BaseStateSpace._parameter_constraints}
+
+    def __init__(self, pole=0.5, *, feedthrough=0.25, n_transient=0):
+        self.pole = pole
+        self.feedthrough = feedthrough
+        self.n_transient = n_transient
+
+    def _fit_normalized(self, U, Y, starts):
+        n_inputs, n_outputs = U.shape[1], Y.shape[1]
+        self.A_ = np.array([[self.pole]])
+        self.B_ = np.ones((1, n_inputs))
+        self.C_ = np.ones((n_outputs, 1))
+        self.D_ = self.feedthrough * np.arange(1, n_outputs + 1)[:, None] * np.ones(
+            (1, n_inputs))
+        self.x0_ = np.zeros(1)
+        self.n_params_ = 0
+        self.fit_starts_ = starts
+
+    def _simulate_normalized(self, U, starts, x0):
+        Y = np.full((U.shape[0], self.C_.shape[0]), np.nan)
+        states = np.full((U.shape[0], 1), np.nan)
+        diverged = False
+        for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
+            x = x0[k].copy()
+            for t in range(begin, end):
+                if not np.all(np.abs(x) <= DIVERGENCE_BOUND):
+                    diverged = True
+                    break
+                states[t] = x
+                Y[t] = self.C_ @ x + self.D_ @ U[t]
+                x = self.A_ @ x + self.B_ @ U[t]
+        return Y, states, diverged
+
+
+def _reference(model, U, x0=0.0):
+    """Normalised output of _FirstOrder for one sequence, written out."""
+    x, out = x0, []
+    for u in U:
+        out.append(x + model.feedthrough * np.arange(1, model.n_outputs_ + 1) * u.sum())
+        x = model.pole * x + u.sum()
+    return np.array(out)
+
+
+@pytest.fixture
+def data():
+    rng = np.random.default_rng(0)
+    X = 3.0 + 2.0 * rng.standard_normal((50, 2))
+    y = 10.0 + 0.5 * rng.standard_normal(50)
+    return X, y
+
+
+@pytest.mark.parametrize(
+    "X_shape, match",
+    [((50,), "2D array"), ((50, 2, 1), "dim 3")],
+)
+def test_x_must_be_2d(data, X_shape, match):
+    X, y = data
+    with pytest.raises(ValueError, match=match):
+        _FirstOrder().fit(np.ones(X_shape), y)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_rejected(data, bad):
+    X, y = data
+    X_bad = X.copy()
+    X_bad[3, 1] = bad
+    with pytest.raises(ValueError, match="NaN|infinity"):
+        _FirstOrder().fit(X_bad, y)
+    y_bad = y.copy()
+    y_bad[7] = bad
+    with pytest.raises(ValueError, match="NaN|infinity"):
+        _FirstOrder().fit(X, y_bad)
+    model = _FirstOrder().fit(X, y)
+    with pytest.raises(ValueError, match="NaN|infinity"):
+        model.predict(X_bad)
+
+
+def test_length_mismatch_and_sequence_id(data):
+    X, y = data
+    with pytest.raises(ValueError, match="inconsistent numbers of samples"):
+        _FirstOrder().fit(X, y[:-1])
+    with pytest.raises(ValueError, match="sequence_id"):
+        _FirstOrder().fit(X, y, sequence_id=np.zeros(49))
+    model = _FirstOrder().fit(X, y)
+    with pytest.raises(ValueError, match="sequence_id"):
+        model.predict(X, sequence_id=np.zeros(10))
+    with pytest.raises(ValueError, match="different numbers of samples"):
+        model.score(X, y[:-1])
+    with pytest.raises(ValueError, match="features"):
+        model.predict(X[:, :1])
+
+
+def test_one_sample_rejected():
+    with pytest.raises(ValueError, match="1 sample"):
+        _FirstOrder().fit(np.ones((1, 1)), np.ones(1))
+
+
+def test_sequences_passed_to_fit(data):
+    X, y = data
+    model = _FirstOrder().fit(X, y, sequence_id=np.repeat([4, 2], 25))
+    np.testing.assert_array_equal(model.fit_starts_, [0, 25, 50])
+
+
+def test_offsets_removed_and_restored(data):
+    X, y = data
+    model = _FirstOrder().fit(X, y)
+    np.testing.assert_allclose(model.u_offset_, X.mean(axis=0))
+    np.testing.assert_allclose(model.u_scale_, X.std(axis=0))
+    assert model.y_offset_ == pytest.approx([y.mean()])
+    assert model.y_scale_ == pytest.approx([y.std()])
+    U = (X - X.mean(axis=0)) / X.std(axis=0)
+    expected = y.mean() + y.std() * _reference(model, U)[:, 0]
+    y_pred = model.predict(X)
+    assert y_pred.shape == (50,)
+    np.testing.assert_allclose(y_pred, expected, rtol=1e-12)
+
+
+def test_constant_signals_get_unit_scale():
+    X = np.column_stack([np.full(20, 3.0), np.arange(20.0)])
+    model = _FirstOrder().fit(X, np.full(20, 7.0))
+    np.testing.assert_array_equal(model.u_scale_[0], 1.0)
+    np.testing.assert_array_equal(model.y_scale_, [1.0])
+    assert np.all(np.isfinite(model.predict(X)))
+
+
+def test_multi_output(data):
+    X, y = data
+    Y = np.column_stack([y, -2.0 * y + 1.0, np.arange(50.0)])
+    model = _FirstOrder().fit(X, Y)
+    assert model.n_outputs_ == 3
+    Y_pred, states = model.simulate(X, return_states=True)
+    assert Y_pred.shape == (50, 3) and states.shape == (50, 1)
+    U = (X - X.mean(axis=0)) / X.std(axis=0)
+    np.testing.assert_allclose(Y_pred, Y.mean(axis=0) + Y.std(axis=0) * _reference(model, U))
+    # A one-column 2-D target keeps its 2-D shape.
+    assert _FirstOrder().fit(X, y[:, None]).predict(X).shape == (50, 1)
+
+
+def test_sequences_restart_the_state(data):
+    X, y = data
+    model = _FirstOrder().fit(X, y)
+    single = model.predict(X[:20])
+    stacked = model.predict(np.vstack([X[:20], X[:20]]), sequence_id=np.repeat([0, 1], 20))
+    np.testing.assert_allclose(stacked, np.concatenate([single, single]))
+    # Without sequence_id the second half continues the state instead.
+    continued = model.predict(np.vstack([X[:20], X[:20]]))
+    assert not np.allclose(continued[20:], single)
+
+
+def test_initial_state(data):
+    X, y = data
+    model = _FirstOrder().fit(X, y)
+    U = (X - X.mean(axis=0)) / X.std(axis=0)
+    from_x0 = model.predict(X, x0=[2.0])
+    np.testing.assert_allclose(from_x0, y.mean() + y.std() * _reference(model, U, 2.0)[:, 0])
+    both = model.predict(X, sequence_id=np.repeat([0, 1], 25), x0=[[2.0], [-1.0]])
+    np.testing.assert_allclose(both[:25], from_x0[:25])
+    np.testing.assert_allclose(
+        both[25:], y.mean() + y.std() * _reference(model, U[25:], -1.0)[:, 0])
+    for bad in ([1.0, 2.0], [[1.0], [2.0]], [[np.nan]], 1.0):
+        with pytest.raises(ValueError, match="x0 must be"):
+            model.predict(X, x0=bad)
+
+
+def test_score_skips_transient(data):
+    X, y = data
+    model = _FirstOrder(n_transient=5).fit(X, y)
+    y_pred = model.predict(X)
+    y_true = y_pred + 0.1 * np.sin(np.arange(50))
+    y_true[:5] += 100.0
+    assert model.score(X, y_true) == pytest.approx(r2_score(y_true[5:], y_pred[5:]))
+    sequence_id = np.repeat([0, 1], 25)
+    y_seq = model.predict(X, sequence_id=sequence_id)
+    keep = np.ones(50, dtype=bool)
+    keep[:5] = keep[25:30] = False
+    y_true = y_seq + 0.1 * np.cos(np.arange(50))
+    y_true[~keep] -= 50.0
+    assert model.score(X, y_true, sequence_id=sequence_id) == pytest.approx(
+        r2_score(y_true[keep], y_seq[keep]))
+    with pytest.raises(ValueError, match="leaves no sample"):
+        _FirstOrder(n_transient=50).fit(X, y).score(X, y)
+
+
+def test_n_transient_validated(data):
+    X, y = data
+    with pytest.raises(ValueError, match="n_transient"):
+        _FirstOrder(n_transient=-1).fit(X, y)
+
+
+def test_divergence_warns_and_gives_nan(data):
+    X, y = data
+    model = _FirstOrder(pole=3.0).fit(X, y)
+    with pytest.warns(SimulationDivergedWarning):
+        y_pred = model.predict(X)
+    first_nan = np.flatnonzero(np.isnan(y_pred))[0]
+    assert 5 < first_nan < 50
+    assert np.all(np.isnan(y_pred[first_nan:]))
+    assert np.all(np.isfinite(y_pred[:first_nan]))
+    with pytest.warns(SimulationDivergedWarning):
+        assert model.score(X, y) == -np.inf
+    stable = _FirstOrder(pole=0.5).fit(X, y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimulationDivergedWarning)
+        stable.predict(X)

@@ -1,0 +1,304 @@
+import shutil
+import time
+
+import numpy as np
+import pytest
+
+from sknlss.datasets import load_cascaded_tanks, make_cascaded_tanks, make_pnlss_reference
+from sknlss.datasets import _cascaded_tanks
+
+
+@pytest.fixture
+def no_network(monkeypatch):
+    """Fail the test if the loader tries to download anything."""
+
+    def refuse(destination):
+        raise AssertionError("the test tried to download")
+
+    monkeypatch.setattr(_cascaded_tanks, "_download", refuse)
+
+
+@pytest.fixture
+def empty_environment(monkeypatch, tmp_path):
+    monkeypatch.delenv("SKNLSS_DATA", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+
+
+# ---------------------------------------------------------------- real data
+@pytest.mark.realdata
+def test_load_cascaded_tanks_records(cascaded_tanks):
+    data = cascaded_tanks
+    assert data.X_est.shape == (1024, 1) and data.X_test.shape == (1024, 1)
+    assert data.y_est.shape == (1024,) and data.y_test.shape == (1024,)
+    assert data.sampling_time == 4.0
+    # First values as recorded in the data's SOURCE.md.
+    np.testing.assert_allclose(data.X_est[:2, 0], [3.25672305, 3.24655232], atol=5e-9)
+    np.testing.assert_allclose(data.y_est[:2], [5.20500496, 5.21538109], atol=5e-9)
+    np.testing.assert_allclose(data.X_test[:2, 0], [0.97619197, 0.99921371], atol=5e-9)
+    np.testing.assert_allclose(data.y_test[:2], [4.97276265, 4.97215229], atol=5e-9)
+    assert np.sum(data.y_est == 10.0) == 47 and np.sum(data.y_test == 10.0) == 37
+    assert "Cascaded Tanks" in data.DESCR
+
+
+@pytest.mark.realdata
+def test_mat_and_csv_agree(cascaded_tanks, tmp_path, empty_environment, no_network):
+    folder = tmp_path / "data"
+    folder.mkdir()
+    source = _find_source(cascaded_tanks.filename)
+    shutil.copy(source.with_name("dataBenchmark_from_mat.csv"), folder)
+    from_csv = load_cascaded_tanks(folder)
+    shutil.copy(source.with_name("dataBenchmark.mat"), folder)
+    from_mat = load_cascaded_tanks(folder)
+    assert from_mat.filename.endswith(".mat") and from_csv.filename.endswith(".csv")
+    for key in ("X_est", "y_est", "X_test", "y_test"):
+        np.testing.assert_array_equal(from_mat[key], from_csv[key])
+
+
+def _find_source(filename):
+    from pathlib import Path
+
+    path = Path(filename)
+    if not path.with_name("dataBenchmark_from_mat.csv").is_file() or not path.with_name(
+        "dataBenchmark.mat"
+    ).is_file():
+        pytest.skip("needs both the .mat file and the CSV conversion")
+    return path
+
+
+@pytest.mark.realdata
+def test_bad_hash_raises(cascaded_tanks, tmp_path, empty_environment, no_network):
+    source = _find_source(cascaded_tanks.filename)
+    folder = tmp_path / "data" / "cascaded_tanks"
+    folder.mkdir(parents=True)
+    content = source.with_name("dataBenchmark_from_mat.csv").read_text()
+    # Change one digit of the first value: still a valid CSV, not the official file.
+    (folder / "dataBenchmark_from_mat.csv").write_text(content.replace("3.2567", "3.2568", 1))
+    with pytest.raises(ValueError, match="SHA-256"):
+        load_cascaded_tanks(tmp_path / "data")
+
+
+def test_bad_hash_raises_without_real_data(tmp_path, empty_environment, no_network):
+    (tmp_path / "dataBenchmark.mat").write_bytes(b"not a MATLAB file")
+    with pytest.raises(ValueError, match="SHA-256"):
+        load_cascaded_tanks(tmp_path)
+
+
+def test_missing_data_message_without_download(tmp_path, empty_environment, no_network,
+                                               monkeypatch):
+    monkeypatch.setenv("SKNLSS_DATA", str(tmp_path / "env"))
+    with pytest.raises(FileNotFoundError) as info:
+        load_cascaded_tanks(tmp_path / "home", download=False)
+    message = str(info.value)
+    for expected in ("dataBenchmark.mat", "dataBenchmark_from_mat.csv", "SKNLSS_DATA",
+                     str(tmp_path / "home" / "cascaded_tanks"), str(tmp_path / "env"),
+                     str(tmp_path / "cache" / "sknlss"), "10.4121/12960104"):
+        assert expected in message
+
+
+def test_failed_download_raises_file_not_found(tmp_path, empty_environment, monkeypatch):
+    calls = []
+
+    def offline(destination):
+        calls.append(destination)
+        raise OSError("network unreachable")
+
+    monkeypatch.setattr(_cascaded_tanks, "_download", offline)
+    with pytest.raises(FileNotFoundError, match="could not be downloaded"):
+        load_cascaded_tanks(tmp_path / "home")
+    assert calls == [tmp_path / "cache" / "sknlss" / "cascaded_tanks" / "dataBenchmark.mat"]
+
+
+def test_search_order(tmp_path, monkeypatch, no_network):
+    for name in ("home", "env", "cache/sknlss"):
+        (tmp_path / name).mkdir(parents=True)
+    monkeypatch.setenv("SKNLSS_DATA", str(tmp_path / "env"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    folders = _cascaded_tanks._search_folders(tmp_path / "home")
+    assert folders == [tmp_path / "home", tmp_path / "env", tmp_path / "cache" / "sknlss"]
+    candidates = list(_cascaded_tanks._candidates(tmp_path / "home"))
+    assert candidates[0] == tmp_path / "home" / "cascaded_tanks" / "dataBenchmark.mat"
+    assert tmp_path / "home" / "dataBenchmark_from_mat.csv" in candidates
+
+
+# ---------------------------------------------------------- simulated tanks
+def test_make_cascaded_tanks_shapes_and_ranges():
+    data = make_cascaded_tanks(random_state=0)
+    assert data.X_est.shape == data.X_test.shape == (1024, 1)
+    assert data.y_est.shape == data.y_test.shape == (1024,)
+    assert data.states_est.shape == (1024, 2)
+    assert data.sampling_time == 4.0
+    for X, y, states in ((data.X_est, data.y_est, data.states_est),
+                         (data.X_test, data.y_test, data.states_test)):
+        assert np.all(X >= 0)
+        assert 1.5 < X.mean() < 4.0
+        assert np.all(states >= 0) and np.all(states <= 10.0)
+        assert 2.0 < y.mean() < 9.0
+    # Both records start from the same initial state.
+    np.testing.assert_array_equal(data.states_est[0], data.states_test[0])
+
+
+def test_make_cascaded_tanks_reproducible_and_noise():
+    first = make_cascaded_tanks(random_state=3)
+    second = make_cascaded_tanks(random_state=3)
+    for key in ("X_est", "y_est", "X_test", "y_test"):
+        np.testing.assert_array_equal(first[key], second[key])
+    clean = make_cascaded_tanks(random_state=3, process_noise=0.0, measurement_noise=0.0)
+    np.testing.assert_array_equal(clean.y_est, clean.states_est[:, 1])
+    noisy = make_cascaded_tanks(random_state=3, process_noise=0.0, measurement_noise=0.05)
+    np.testing.assert_array_equal(noisy.states_est, clean.states_est)
+    assert np.std(noisy.y_est - clean.y_est) == pytest.approx(0.05, rel=0.15)
+
+
+def test_make_cascaded_tanks_steady_state_and_overflow():
+    n = 400
+    u = np.full(n, 2.0)
+    k = (0.05, 0.05, 0.05, 0.042)
+    data = make_cascaded_tanks(n, input=(u, u), process_noise=0.0, measurement_noise=0.0,
+                               x0=(0.0, 0.0), k=k)
+    # Equilibrium of eq. 1: sqrt(x1) = k4 u / k1, sqrt(x2) = k2 sqrt(x1) / k3.
+    level = (k[3] * 2.0 / k[0]) ** 2
+    np.testing.assert_allclose(data.states_est[-1], [level, level], rtol=1e-3)
+    # A large input fills the upper tank to its overflow level and the lower
+    # one to its own.
+    big = np.full(n, 8.0)
+    full = make_cascaded_tanks(n, input=(big, big), process_noise=0.0,
+                               measurement_noise=0.0, overflow=(6.0, 9.0))
+    np.testing.assert_allclose(full.states_est[-1], [6.0, 9.0])
+
+
+def test_make_cascaded_tanks_rk4_converges():
+    u = make_cascaded_tanks(random_state=0).X_est[:, 0]
+    coarse, fine = (make_cascaded_tanks(input=(u, u), process_noise=0.0,
+                                        measurement_noise=0.0, overflow=(50.0, 50.0),
+                                        n_substeps=m).states_est for m in (4, 32))
+    np.testing.assert_allclose(coarse, fine, atol=1e-4)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"n_samples": 2}, "n_samples"),
+        ({"input": (np.ones(10), np.ones(10))}, "input must be a pair"),
+        ({"input": (np.ones(1024), np.full(1024, np.nan))}, "finite"),
+        ({"measurement_noise": -1.0}, "measurement_noise"),
+        ({"overflow": (10.0,)}, "overflow"),
+        ({"k": (0.05, 0.05, 0.05)}, "k must be"),
+        ({"x0": (1.0, -1.0)}, "x0"),
+        ({"overflow_fraction": 2.0}, "overflow_fraction"),
+    ],
+)
+def test_make_cascaded_tanks_bad_arguments(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        make_cascaded_tanks(**kwargs)
+
+
+# ----------------------------------------------------------- PNLSS reference
+def test_pnlss_reference_shapes_and_model():
+    data = make_pnlss_reference()
+    n_rows = 4 * 3 * 1024
+    assert data.X.shape == (n_rows, 1) and data.y.shape == (n_rows,)
+    np.testing.assert_array_equal(data.sequence_id, np.repeat(np.arange(4), 3 * 1024))
+    assert data.period == 1024
+    np.testing.assert_array_equal(data.lines, np.arange(1, 461, 2))
+    assert data.A.shape == (2, 2) and data.B.shape == (2, 1)
+    assert data.C.shape == (1, 2) and data.D.shape == (1, 1)
+    assert data.E.shape == (2, 16) and data.F.shape == (1, 16)
+    assert data.exponents.shape == (16, 3)
+    # Documented order: x1^2, x1 x2, x1 u, x2^2, ..., then degree 3 ending in u^3.
+    np.testing.assert_array_equal(data.exponents[:4], [[2, 0, 0], [1, 1, 0], [1, 0, 1],
+                                                       [0, 2, 0]])
+    np.testing.assert_array_equal(data.exponents[-1], [0, 0, 3])
+    assert np.all(np.abs(np.linalg.eigvals(data.A)) < 1)
+    np.testing.assert_allclose(np.sqrt(np.mean(data.X**2)), 0.05, rtol=1e-12)
+
+
+def test_pnlss_reference_steady_state_and_reproducible():
+    data = make_pnlss_reference(noise=False)
+    periods = data.y.reshape(4, 3, 1024)
+    np.testing.assert_allclose(periods[:, 0], periods[:, 2], atol=1e-12)
+    again = make_pnlss_reference(noise=False)
+    np.testing.assert_array_equal(data.y, again.y)
+    other = make_pnlss_reference(noise=False, random_state=1)
+    assert not np.allclose(data.y, other.y)
+
+
+def test_pnlss_reference_matches_a_direct_simulation():
+    data = make_pnlss_reference(n_realizations=1, n_periods=1, n_samples_per_period=64,
+                                noise=False)
+    u = data.X[:, 0]
+    # Steady state: starting from the state reached after one earlier period
+    # (the same input), a plain simulation reproduces the data.
+    x = np.zeros(2)
+    for _ in range(2):
+        y = np.empty(64)
+        for t in range(64):
+            s = np.array([x[0], x[1], u[t]])
+            z = np.prod(s ** data.exponents, axis=1)
+            y[t] = (data.C @ x + data.D[:, 0] * u[t] + data.F @ z)[0]
+            x = data.A @ x + data.B[:, 0] * u[t] + data.E @ z
+    np.testing.assert_allclose(data.y, y, rtol=1e-12, atol=1e-15)
+
+
+def test_pnlss_reference_noise_level():
+    data = make_pnlss_reference()
+    noise = data.y - data.y_noiseless
+    # White noise of std 1e-3 std(y) summed with its successor: std sqrt(2) times.
+    expected = np.sqrt(2) * 1e-3 * data.y_noiseless.std()
+    assert noise.std() == pytest.approx(expected, rel=0.05)
+    lag1 = np.corrcoef(noise[1:-2], noise[2:-1])[0, 1]
+    assert lag1 == pytest.approx(0.5, abs=0.05)
+
+
+def test_pnlss_reference_is_fast():
+    make_pnlss_reference()
+    start = time.perf_counter()
+    make_pnlss_reference(n_realizations=4, n_periods=4)
+    assert time.perf_counter() - start < 0.1
+
+
+def _serve_zip(monkeypatch, member_name, content):
+    """Make the loader's download read a local zip archive instead of the network."""
+    import io
+    import zipfile
+
+    archive = io.BytesIO()
+    with zipfile.ZipFile(archive, "w") as zipped:
+        zipped.writestr("CascadedTanksFiles/TanksBenchmark.pdf", b"%PDF")
+        zipped.writestr(member_name, content)
+    requested = []
+
+    def fake_urlopen(url, timeout):
+        requested.append((url, timeout))
+        return io.BytesIO(archive.getvalue())
+
+    monkeypatch.setattr(_cascaded_tanks.urllib.request, "urlopen", fake_urlopen)
+    return requested
+
+
+@pytest.mark.realdata
+def test_download_extracts_and_verifies(cascaded_tanks, tmp_path, empty_environment,
+                                        monkeypatch):
+    source = _find_source(cascaded_tanks.filename)
+    requested = _serve_zip(monkeypatch, "CascadedTanksFiles/dataBenchmark.mat",
+                           source.with_name("dataBenchmark.mat").read_bytes())
+    data = load_cascaded_tanks(tmp_path / "empty")
+    assert requested == [(_cascaded_tanks.ARCHIVE_URL, _cascaded_tanks._DOWNLOAD_TIMEOUT)]
+    cached = tmp_path / "cache" / "sknlss" / "cascaded_tanks" / "dataBenchmark.mat"
+    assert data.filename == str(cached) and cached.is_file()
+    np.testing.assert_array_equal(data.y_test, cascaded_tanks.y_test)
+    # The cached copy is found afterwards without any download.
+    monkeypatch.setattr(_cascaded_tanks, "_download", None)
+    assert load_cascaded_tanks(tmp_path / "empty").filename == str(cached)
+
+
+def test_download_with_wrong_content_is_rejected(tmp_path, empty_environment, monkeypatch):
+    _serve_zip(monkeypatch, "CascadedTanksFiles/dataBenchmark.mat", b"corrupt")
+    with pytest.raises(FileNotFoundError, match="unexpected SHA-256"):
+        load_cascaded_tanks(tmp_path / "empty")
+    assert not list((tmp_path / "cache").rglob("*.mat"))
+
+
+def test_download_of_something_else_is_rejected(tmp_path, empty_environment, monkeypatch):
+    _serve_zip(monkeypatch, "README.txt", b"no data here")
+    with pytest.raises(FileNotFoundError, match="not the expected archive"):
+        load_cascaded_tanks(tmp_path / "empty")
