@@ -2,17 +2,18 @@
 
 One private optimiser serves every estimator: it minimises ``||r(theta)||^2``
 given a function that simulates the model and returns the residual and its
-Jacobian. The step is computed from the SVD of the column-scaled Jacobian, so a
-whole sweep of damping values costs one factorisation, and the smallest singular
-directions can be discarded (the ``n^2`` directions along which a similarity
-transform of the states leaves the output unchanged).
+Jacobian. The step is computed from the SVD of the column-scaled Jacobian (via
+the triangular factor of its QR), so a whole sweep of damping values costs one
+factorisation, and the smallest singular directions can be discarded (the
+``n^2`` directions along which a similarity transform of the states leaves the
+output unchanged).
 """
 
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import svd
+from scipy.linalg import qr, svd
 from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
@@ -52,6 +53,40 @@ class LMResult:
     best_iter: int
     n_iter: int
     converged: bool
+
+
+def _scaled_step_factors(J, r):
+    """SVD factors of the column-scaled Jacobian needed for the damped step.
+
+    With ``Js = J / col_scale = U diag(s) Vt``, the damped step is
+    ``-Vt.T @ (s / (s**2 + d**2) * (U.T @ r))``. A Householder QR of the
+    augmented matrix ``[Js, r]`` gives the triangular factor ``R`` of ``Js``
+    and ``Q.T @ r``; the SVD of the small ``R = Ur diag(s) Vt`` then gives
+    ``U.T @ r = Ur.T @ (Q.T @ r)``. This is as accurate as the SVD of ``Js``
+    but never forms the tall ``U`` (as large as J), which halves the work and
+    the memory of a step on long records.
+
+    Returns
+    -------
+    s : ndarray of shape (k,)
+        Singular values, decreasing.
+    Vt : ndarray of shape (k, n_params)
+    col_scale : ndarray of shape (n_params,)
+    projected : ndarray of shape (k,)
+        ``U.T @ r``.
+    """
+    m, p = J.shape
+    col_scale = np.sqrt(np.einsum("ij,ij->j", J, J))
+    col_scale[col_scale == 0.0] = 1.0
+    augmented = np.empty((m, p + 1), order="F")
+    np.divide(J, col_scale, out=augmented[:, :p])
+    augmented[:, p] = r
+    # mode="raw" returns the economic triangular factor; "r" would pad it with
+    # zero rows to the full height of J.
+    R = qr(augmented, mode="raw", overwrite_a=True, check_finite=False)[1]
+    Ur, s, Vt = svd(R[:, :p], full_matrices=False, check_finite=False,
+                    lapack_driver="gesdd")
+    return s, Vt, col_scale, Ur.T @ R[:, p]
 
 
 def _finite_residual(residual, theta):
@@ -123,14 +158,10 @@ def levenberg_marquardt(
     n_iter = 0
     with threadpool_limits(limits=1, user_api="blas"):
         while n_iter < max_iter:
-            col_scale = np.linalg.norm(J, axis=0)
-            col_scale[col_scale == 0.0] = 1.0
-            Uj, s, Vt = svd(J / col_scale, full_matrices=False, check_finite=False,
-                            lapack_driver="gesdd")
+            s, Vt, col_scale, projected = _scaled_step_factors(J, r)
             rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps))
             rank = max(1, min(rank, s.size - n_drop))
-            Uj, s, Vt = Uj[:, :rank], s[:rank], Vt[:rank]
-            projected = Uj.T @ r
+            s, Vt, projected = s[:rank], Vt[:rank], projected[:rank]
             if damping is None:
                 damping = s[0]
             for _ in range(_MAX_REJECTED):
@@ -165,7 +196,7 @@ def levenberg_marquardt(
                 break
     if validation_loss is None:
         best_theta, best_iter = theta, n_iter
-    if not converged:
+    if not converged and max_iter > 0:
         warnings.warn(
             f"{label}: the iteration limit max_iter={max_iter} was reached before "
             "the cost stopped decreasing; increase max_iter to refine the fit.",

@@ -1,0 +1,127 @@
+"""Speed and memory of PNLSSRegressor.
+
+Prints, for BLAS limited to 1 and to 2 threads (threadpoolctl):
+
+- one simulation and one Jacobian of the reference problem (the PNLSS
+  tutorial system: 2 estimation realizations of one period of 1024 samples,
+  each preceded by a one-period transient, n = 2, degrees 2-3 "full",
+  57 parameters);
+- a 60-iteration fit of that problem;
+- a 20-iteration fit at N = 131072 samples (and at N / 4, N / 2 to show how
+  time and peak memory scale), each in a fresh process so that the peak
+  resident memory belongs to that fit alone.
+
+The Levenberg-Marquardt step always runs its SVD with one BLAS thread (see
+``sknlss._optimize``); the thread setting matters for the rest (the BLA).
+
+Run: ``python benchmarks/bench_pnlss.py``
+"""
+
+import json
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+from sklearn.exceptions import ConvergenceWarning
+from threadpoolctl import threadpool_limits
+
+from sknlss import PNLSSRegressor
+from sknlss._base import DIVERGENCE_BOUND
+from sknlss._pnlss import _steady_state_rows
+from sknlss._pnlss_kernels import jacobian_pnlss, simulate_pnlss
+from sknlss.datasets import make_pnlss_reference
+
+
+def _best_time(func, repeat):
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        func()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def reference_problem():
+    """Period-averaged estimation data of the reference system, 2 realizations."""
+    data = make_pnlss_reference(n_realizations=2, n_periods=3)
+    period = data.period
+    X = data.X.reshape(2, 3, period)[:, 0].reshape(-1, 1)
+    y = data.y.reshape(2, 3, period).mean(axis=1).ravel()
+    return X, y, np.repeat([0, 1], period), period
+
+
+def bench_reference():
+    X, y, sequence_id, period = reference_problem()
+    model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model.fit(X, y, sequence_id=sequence_id)  # also compiles the kernels
+        fit_time = _best_time(lambda: model.fit(X, y, sequence_id=sequence_id), 3)
+        staged = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60,
+                                refine_linear=True)
+        staged_time = _best_time(lambda: staged.fit(X, y, sequence_id=sequence_id), 3)
+    U = (X - model.u_offset_) / model.u_scale_
+    index, starts, original = _steady_state_rows(np.array([0, period, 2 * period]), period)
+    U = np.ascontiguousarray(U[index])
+    rows = np.where(original, np.cumsum(original) - 1, -1)
+    args = (model.A_, model.B_, model.C_, model.D_, model.E_, model.F_,
+            model.state_exponents_, model.output_exponents_, U, starts)
+    x0 = np.zeros((2, 2))
+    sim = _best_time(lambda: simulate_pnlss(*args, x0, DIVERGENCE_BOUND), 50)
+    jac = _best_time(lambda: jacobian_pnlss(*args, x0, False, DIVERGENCE_BOUND, rows), 50)
+    print(f"  reference problem: {U.shape[0]} simulated samples, "
+          f"{model.n_params_} parameters")
+    print(f"  one simulation                  {1e3 * sim:8.2f} ms")
+    print(f"  one Jacobian                    {1e3 * jac:8.2f} ms")
+    print(f"  60-iteration fit                {fit_time:8.2f} s   "
+          f"({model.n_iter_} iterations, BLA included)")
+    print(f"  same with refine_linear=True    {staged_time:8.2f} s")
+
+
+_LARGE_FIT = """
+import json, resource, sys, time, warnings
+import numpy as np
+from threadpoolctl import threadpool_limits
+from sklearn.exceptions import ConvergenceWarning
+from sknlss import PNLSSRegressor
+from sknlss.datasets import make_pnlss_reference
+n_samples, threads = int(sys.argv[1]), int(sys.argv[2])
+period = 1024
+data = make_pnlss_reference(n_realizations=n_samples // (2 * period), n_periods=2)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=20)
+with threadpool_limits(limits=threads, user_api="blas"), warnings.catch_warnings():
+    warnings.simplefilter("ignore", ConvergenceWarning)
+    start = time.perf_counter()
+    model.fit(data.X, data.y, sequence_id=data.sequence_id)
+    elapsed = time.perf_counter() - start
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(json.dumps({"time": elapsed, "peak_mb": after / 1024, "data_mb": before / 1024,
+                  "n_iter": model.n_iter_}))
+"""
+
+
+def bench_large(threads):
+    for n_samples in (32768, 65536, 131072):
+        out = subprocess.run(
+            [sys.executable, "-c", _LARGE_FIT, str(n_samples), str(threads)],
+            capture_output=True, text=True, check=True,
+        )
+        result = json.loads(out.stdout.strip().splitlines()[-1])
+        print(f"  N = {n_samples:6d}: 20-iteration fit {result['time']:6.2f} s, "
+              f"peak RSS {result['peak_mb']:7.1f} MB "
+              f"(before the fit {result['data_mb']:6.1f} MB)")
+
+
+def main():
+    for threads in (1, 2):
+        print(f"BLAS threads: {threads}")
+        with threadpool_limits(limits=threads, user_api="blas"):
+            bench_reference()
+        bench_large(threads)
+
+
+if __name__ == "__main__":
+    main()
