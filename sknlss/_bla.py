@@ -173,6 +173,15 @@ class BLAEstimator(_BaseStateSpace):
     and for MIMO data, and the state-space parametrisation stays well
     conditioned where polynomial coefficients do not. Steps that would make
     the model unstable are rejected, so the BLA can always be simulated.
+    Moreover, every pole's damping is kept large enough for its half-power
+    band to reach a measured frequency: the data do not determine the damping
+    of a pole farther from them, and an unconstrained fit lets such a pole
+    (typically one the order does not need) drift to the unit circle, where
+    it amplifies the little input content outside the measured band. Near
+    DC this bounds the slowest time constant by ``1 / (2 pi f_min)`` samples,
+    ``f_min`` being the lowest frequency of ``frequencies_``; outside the
+    measured band the bound tightens with the distance to it, so to identify
+    poles there, excite and measure up to them.
 
     References
     ----------

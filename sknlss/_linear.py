@@ -7,6 +7,8 @@
   the nonparametric FRF (the criterion of paper eq. 9, in a state-space rather
   than a polynomial parametrisation, which stays well conditioned for MIMO and
   high orders), solved by the shared Levenberg-Marquardt optimiser;
+- :func:`pole_radius_limit` and :func:`stabilize`: the poles the FRF data can
+  support, and the projection of a model onto them;
 - :func:`balanced_realization`: square-root balancing of a stable discrete-time
   model;
 - :func:`simulate_linear` and :func:`estimate_initial_state`: compiled free-run
@@ -25,9 +27,14 @@ from sklearn.exceptions import ConvergenceWarning
 from ._base import DIVERGENCE_BOUND
 from ._optimize import LMResult, levenberg_marquardt
 
-# Spectral radius allowed for a fitted BLA: the model must be simulated, so the
-# refinement rejects steps that leave the unit disc with this margin.
+# Spectral radius allowed for any fitted BLA whatever the data: the model must
+# be simulated, so the refinement rejects steps that leave the unit disc with
+# this margin (the data usually bound the poles more tightly, see
+# `pole_radius_limit`).
 _MAX_SPECTRAL_RADIUS = 1.0 - 1e-9
+# Relative distance below its limit at which `stabilize` places a pole it moves,
+# so that the refinement starts strictly inside the admissible region.
+_LIMIT_MARGIN = 1e-6
 # Levenberg-Marquardt steps between two re-balancings of the model.
 _ROUND_ITER = 20
 
@@ -134,21 +141,86 @@ def frf_subspace(frequencies, G, weight, n_states):
     O = (vecs * root) @ left[:, :n_states]
     C = O[:n_y]
     A = np.linalg.lstsq(O[:-n_y], O[n_y:], rcond=None)[0]
-    A = stabilize(A)
+    A = stabilize(A, frequencies)
     B, D = _fit_bd(A, C, frequencies, G, weight)
     return A, B, C, D
 
 
-def stabilize(A):
-    """Reflect the eigenvalues outside the unit disc into it (``1 / conj(p)``)."""
+def pole_radius_limit(poles, frequencies):
+    """Largest radius of each pole that FRF data at ``frequencies`` can support.
+
+    A pole ``p = exp(-sigma + 2j pi phi)`` shapes the FRF over about
+    ``sigma / (2 pi)`` cycles per sample around ``phi`` (its half-power
+    half-width). When no measured frequency lies that close to ``phi``, the
+    data see only the pole's far field ``R / (z - p)``, which hardly depends
+    on ``sigma``: the damping is not determined, and a least-squares fit is
+    free to drift towards ``sigma = 0``: a mode on the stability limit that
+    amplifies any input content near ``phi`` by about ``1 / sigma`` in
+    simulation (out of the excited band, or, near DC, a near-integrator with
+    a time constant far beyond the record). The damping is therefore kept at least ``2 pi d``,
+    with ``d`` the distance from ``phi`` to the nearest measured frequency:
+    the half-power band of every pole reaches the data. For a real pole near
+    ``z = 1`` this bounds its time constant by ``1 / (2 pi f_min)`` samples,
+    ``f_min`` being the lowest measured frequency (the corner frequency of the
+    mode is not below it); poles within a densely measured band are only
+    kept off the unit circle.
+
+    Parameters
+    ----------
+    poles : ndarray of shape (n,), complex
+        Discrete-time poles.
+    frequencies : ndarray of shape (n_freq,)
+        Measured frequencies in cycles per sample.
+
+    Returns
+    -------
+    limit : ndarray of shape (n,)
+        Radius limit of each pole, at most ``1 - 1e-9``.
+    """
+    phase = np.abs(np.angle(poles)) / (2 * np.pi)
+    distance = np.min(np.abs(phase[:, None] - np.asarray(frequencies)[None, :]), axis=1)
+    return np.minimum(np.exp(-2 * np.pi * distance), _MAX_SPECTRAL_RADIUS)
+
+
+def _admissible(A, frequencies):
+    poles = np.linalg.eigvals(A)
+    return bool(np.all(np.abs(poles) < pole_radius_limit(poles, frequencies)))
+
+
+def stabilize(A, frequencies=None):
+    """Move the poles of ``A`` into the admissible region.
+
+    Poles outside the unit disc are reflected into it (``1 / conj(p)``), then
+    poles beyond their radius limit are pulled in, at the same angle, to just
+    below it: the limit of :func:`pole_radius_limit` when ``frequencies`` is
+    given, else ``1 - 1e-9``.
+
+    Parameters
+    ----------
+    A : ndarray of shape (n, n)
+        State matrix.
+    frequencies : ndarray of shape (n_freq,), default=None
+        Measured frequencies in cycles per sample.
+
+    Returns
+    -------
+    A : ndarray
+        ``A`` itself when all its poles are admissible.
+    """
     poles, vectors = np.linalg.eig(A)
-    unstable = np.abs(poles) >= _MAX_SPECTRAL_RADIUS
-    if not unstable.any():
+    if frequencies is None:
+        limit = np.full(poles.shape, _MAX_SPECTRAL_RADIUS)
+    else:
+        limit = pole_radius_limit(poles, frequencies)
+    outside = np.abs(poles) > 1.0
+    poles = np.where(outside, 1.0 / np.conj(np.where(outside, poles, 1.0)), poles)
+    radius = np.abs(poles)
+    # the reflection keeps the angle, hence the limit
+    beyond = radius >= limit
+    if not (outside.any() or beyond.any()):
         return A
-    poles = np.where(unstable, 1.0 / np.conj(poles), poles)
-    # keep reflected poles strictly inside (a pole exactly on the circle)
-    poles = np.where(np.abs(poles) >= _MAX_SPECTRAL_RADIUS,
-                     poles / np.abs(poles) * (1.0 - 1e-3), poles)
+    poles = np.where(beyond, poles / np.where(beyond, radius, 1.0)
+                     * limit * (1.0 - _LIMIT_MARGIN), poles)
     return np.real(vectors @ np.diag(poles) @ np.linalg.inv(vectors))
 
 
@@ -164,7 +236,9 @@ def refine_frf(A, B, C, D, frequencies, G, weight, *, max_iter=100, tol=1e-10,
 
     Minimises ``sum |weight (G_model - G)|^2`` over all entries of (A, B, C, D)
     by Levenberg-Marquardt, dropping the ``n^2`` directions of the similarity
-    transform and rejecting steps whose A is not stable. The iterations run
+    transform and rejecting steps that take a pole beyond the limit that the
+    data support (:func:`pole_radius_limit`; a starting ``A`` beyond it is
+    first moved by :func:`stabilize`). The iterations run
     in rounds of at most ``_ROUND_ITER`` steps, the model being re-balanced
     between rounds: the similarity freedom otherwise lets the realization
     drift into poorly conditioned coordinates, where the steps become tiny
@@ -179,10 +253,11 @@ def refine_frf(A, B, C, D, frequencies, G, weight, *, max_iter=100, tol=1e-10,
     z = np.exp(2j * np.pi * frequencies)
     eye = np.eye(n)
     w = weight
+    A = stabilize(A, frequencies)
 
     def residual(theta, jacobian):
         A_, B_, C_, D_ = _unpack(theta, n, n_u, n_y)
-        if np.max(np.abs(np.linalg.eigvals(A_))) >= _MAX_SPECTRAL_RADIUS:
+        if not _admissible(A_, frequencies):
             return None, None
         X = np.linalg.inv(z[:, None, None] * eye - A_)  # (F, n, n)
         P = C_ @ X  # (F, n_y, n)

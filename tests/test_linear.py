@@ -10,6 +10,7 @@ from sknlss._linear import (
     estimate_initial_state,
     frf_subspace,
     n_block_rows,
+    pole_radius_limit,
     refine_frf,
     simulate_linear,
     ss_frf,
@@ -52,7 +53,8 @@ def test_subspace_exact_on_noise_free_frf(n_u, n_y):
 
 def test_refine_frf_recovers_perturbed_model():
     A, B, C, D = _random_stable(3, 1, 1, seed=4)
-    f = np.arange(1, 100) / 256
+    # one pole lies at Nyquist: measured up to it, so that the data reach it
+    f = np.arange(1, 129) / 256
     G = ss_frf(A, B, C, D, f)
     rng = np.random.default_rng(0)
     A0 = A + 0.02 * rng.standard_normal(A.shape)
@@ -77,6 +79,30 @@ def test_stabilize_reflects_unstable_poles():
     np.testing.assert_allclose(np.sort(np.linalg.eigvals(stabilize(A)).real), [0.5, 0.8])
     stable = np.array([[0.5, 0.2], [-0.1, 0.3]])
     assert stabilize(stable) is stable
+
+
+def test_pole_radius_limit_follows_the_measured_band():
+    f = np.arange(1, 63) / 1024  # a record of 1024 samples excited below 0.06
+    poles = np.array([0.999, -0.999, 0.99 * np.exp(2j * np.pi * 30 / 1024),
+                      0.5 * np.exp(2j * np.pi * 0.2)])
+    limit = pole_radius_limit(poles, f)
+    # near DC: time constant at most 1 / (2 pi f_min) samples
+    np.testing.assert_allclose(limit[0], np.exp(-2 * np.pi / 1024))
+    # out of band: damping at least 2 pi times the distance to the band
+    np.testing.assert_allclose(limit[1], np.exp(-2 * np.pi * (0.5 - 62 / 1024)))
+    np.testing.assert_allclose(limit[3], np.exp(-2 * np.pi * (0.2 - 62 / 1024)))
+    # on a measured frequency the data determine the damping: only stability
+    assert limit[2] == 1.0 - 1e-9
+    np.testing.assert_array_equal(limit, pole_radius_limit(np.conj(poles), f))
+
+
+def test_stabilize_pulls_unsupported_poles_to_the_limit():
+    f = np.arange(1, 63) / 1024
+    A = np.diag([1.002, -0.9999, 0.9])
+    poles = np.sort(np.linalg.eigvals(stabilize(A, f)).real)
+    expected = [-np.exp(-2 * np.pi * (0.5 - 62 / 1024)), 0.9, np.exp(-2 * np.pi / 1024)]
+    np.testing.assert_allclose(poles, expected, rtol=1e-5)
+    assert np.all(np.abs(poles) < pole_radius_limit(poles.astype(complex), f))
 
 
 def test_balanced_realization():
