@@ -11,10 +11,17 @@ NLSS2Regressor
     estimated states.
 DecoupledPNLSS
     PNLSS whose multivariate polynomials are decoupled into univariate branches.
+
+Functions
+---------
+decouple_polynomial
+    Decoupling of a multivariate polynomial map into univariate branches
+    through the CPD of its Jacobian tensor.
 """
 
 from ._base import SimulationDivergedWarning
 from ._bla import BLAEstimator
+from ._decouple import decouple_polynomial
 from ._decoupled import DecoupledPNLSS
 from ._nlss2 import NLSS2Regressor
 from ._pnlss import PNLSSRegressor
@@ -27,4 +34,5 @@ __all__ = [
     "NLSS2Regressor",
     "PNLSSRegressor",
     "SimulationDivergedWarning",
+    "decouple_polynomial",
 ]
