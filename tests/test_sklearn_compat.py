@@ -82,6 +82,39 @@ def test_grid_search_time_series_split_on_one_record(three_records):
     assert scores[0] < max(scores[1], scores[2])
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+@pytest.mark.parametrize(
+    "estimator, grid",
+    [
+        (PNLSSRegressor(n_states=2, max_iter=10), {"degree": [2, (2, 3)]}),
+        (
+            NLSS2Regressor(n_states=2, max_iter=10, random_state=0),
+            {"alpha": [0.1, 1.0], "n_neurons": [1, 3]},
+        ),
+        (
+            DecoupledPNLSS(n_states=2, max_iter=10, n_restarts=2, random_state=0,
+                           pnlss=PNLSSRegressor(max_iter=10)),
+            {"rank": [1, 2], "pnlss__degree": [2, (2, 3)]},
+        ),
+    ],
+    ids=lambda value: type(value).__name__ if hasattr(value, "fit") else "",
+)
+def test_grid_search_tunes_nonlinear_hyperparameters(three_records, estimator, grid):
+    u, y, _ = three_records
+    search = GridSearchCV(
+        estimator, grid, cv=TimeSeriesSplit(n_splits=2),
+        scoring=make_transient_scorer("rms", n_transient=20), error_score="raise",
+    ).fit(u[:300], y[:300])
+    n_candidates = int(np.prod([len(values) for values in grid.values()]))
+    assert len(search.cv_results_["params"]) == n_candidates
+    assert np.all(np.isfinite(search.cv_results_["mean_test_score"]))
+    assert set(search.best_params_) == set(grid)
+    # The refitted model is the best candidate, fitted on the whole record.
+    assert search.best_estimator_.get_params()[next(iter(grid))] == search.best_params_[
+        next(iter(grid))
+    ]
+
+
 @pytest.fixture
 def routing():
     with sklearn.config_context(enable_metadata_routing=True):
