@@ -13,10 +13,10 @@ import json
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
-import warnings
-
+import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 
 from . import BLAEstimator, DecoupledPNLSS, NLSS2Regressor, PNLSSRegressor
@@ -76,6 +76,7 @@ def _load_data(data_home, download, out):
 
 
 def _evaluate(name, factory, data):
+    """Fit one model; return its table row, the fitted model and its simulations."""
     model = factory()
     start = time.perf_counter()
     with warnings.catch_warnings():
@@ -86,7 +87,7 @@ def _evaluate(name, factory, data):
     fit_time = time.perf_counter() - start
     y_est = model.predict(data.X_est)
     y_test = model.predict(data.X_test)
-    return {
+    row = {
         "model": name,
         "n_params": int(model.n_params_),
         "rms_est": rms_error(data.y_est, y_est),
@@ -95,6 +96,66 @@ def _evaluate(name, factory, data):
                                  y_test[_BENCHMARK_WINDOW:]),
         "fit_time": fit_time,
     }
+    return row, model, (y_est, y_test)
+
+
+def _noise_floor(y, sampling_time):
+    """Standard deviation of the output noise, from the bins above the excited band.
+
+    The benchmark input holds no power above 0.0144 Hz; well above that band
+    (four times its edge), the output spectrum is the noise floor.
+    """
+    spectrum = np.fft.rfft(y - y.mean())
+    frequencies = np.fft.rfftfreq(y.size, d=sampling_time)
+    quiet = frequencies > 4 * 0.0144
+    return float(np.sqrt(np.mean(np.abs(spectrum[quiet]) ** 2) / y.size))
+
+
+def _write_figures(data, fitted, simulations, output, out):
+    """Paper-style figures: the BLA's FRF, simulations and error spectra (PNG)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib is not installed (pip install 'sknlss[plot]'): "
+              "no figures written.", file=out)
+        return
+    from .plotting import plot_error_spectrum, plot_frf, plot_simulation
+
+    Ts = data.sampling_time
+    finite = {name: sims for name, sims in simulations.items()
+              if all(np.all(np.isfinite(sim)) for sim in sims)}
+    paths = []
+    if "BLA" in fitted:
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        plot_frf(fitted["BLA"], sampling_time=Ts, ax=ax)
+        ax.set_title("Best Linear Approximation (estimation record)")
+        paths.append(output / "bla_frf.png")
+        fig.savefig(paths[-1], dpi=120, bbox_inches="tight")
+        plt.close(fig)
+    for record, index, measured in (("estimation", 0, data.y_est),
+                                    ("test", 1, data.y_test)):
+        fig, ax = plt.subplots(figsize=(10, 5))
+        plot_simulation(measured, {name: sims[index] for name, sims in finite.items()},
+                        sampling_time=Ts, unit="V", ax=ax)
+        ax.set_title(f"Cascaded Tanks, {record} record: simulated outputs and errors")
+        paths.append(output / f"simulation_{record}.png")
+        fig.savefig(paths[-1], dpi=120, bbox_inches="tight")
+        plt.close(fig)
+    fig, ax = plt.subplots(figsize=(10, 5))
+    plot_error_spectrum(data.y_test, {name: sims[1] for name, sims in finite.items()},
+                        noise_level=_noise_floor(data.y_test, Ts), sampling_time=Ts,
+                        unit="V", ax=ax)
+    ax.set_title("Test record: spectra of the output and of the simulation errors")
+    paths.append(output / "error_spectrum_test.png")
+    fig.savefig(paths[-1], dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    skipped = sorted(set(simulations) - set(finite))
+    if skipped:
+        print(f"Not drawn (diverged): {', '.join(skipped)}", file=out)
+    print("Figures: " + ", ".join(str(path) for path in paths), file=out)
 
 
 def _format_cell(value, fmt):
@@ -133,8 +194,9 @@ def reproduce(data_home=None, output=None, *, download=True, models=None, out=No
         First folder searched for the data (see
         :func:`sknlss.datasets.load_cascaded_tanks`).
     output : str or path-like, default=None
-        Folder where ``cascaded_tanks.csv`` and ``cascaded_tanks.json`` are
-        written; nothing is written when None.
+        Folder where ``cascaded_tanks.csv``, ``cascaded_tanks.json`` and the
+        figures (PNG, with matplotlib) are written; nothing is written when
+        None.
     download : bool, default=True
         Whether to download the data when they are absent.
     models : list of (str, callable), default=None
@@ -153,14 +215,17 @@ def reproduce(data_home=None, output=None, *, download=True, models=None, out=No
     print(f"Cascaded Tanks, data: {source}", file=out)
     print("Fitted on the estimation record only; x0 estimated there and reused on "
           "the test record.\n", file=out)
-    rows = []
+    rows, fitted, simulations = [], {}, {}
     for name, factory in MODELS if models is None else models:
-        rows.append(_evaluate(name, factory, data))
-        print(f"  fitted {name} in {rows[-1]['fit_time']:.2f} s", file=out, flush=True)
+        row, fitted[name], simulations[name] = _evaluate(name, factory, data)
+        rows.append(row)
+        print(f"  fitted {name} in {row['fit_time']:.2f} s", file=out, flush=True)
     print("\n" + _format_table(rows), file=out)
     if output is not None:
-        _write_results(rows, source, Path(output))
-        print(f"\nResults written to {Path(output).resolve()}", file=out)
+        output = Path(output)
+        _write_results(rows, source, output)
+        print(f"\nResults written to {output.resolve()}", file=out)
+        _write_figures(data, fitted, simulations, output, out)
     return rows
 
 
@@ -190,8 +255,9 @@ def main(argv=None):
     command.add_argument("--data-home", default=None,
                          help="folder holding cascaded_tanks/dataBenchmark.mat "
                               "(default: $SKNLSS_DATA, then the user cache folder)")
-    command.add_argument("--output", default=None,
-                         help="folder for the results (CSV and JSON)")
+    command.add_argument("--output", default="sknlss_output",
+                         help="folder for the results (CSV, JSON and PNG figures; "
+                              "default: %(default)s)")
     command.add_argument("--no-download", action="store_true",
                          help="never download the data; simulate them when absent")
     args = parser.parse_args(argv)
