@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 
 from ._base import DIVERGENCE_BOUND
+from ._kernels import out_of_bounds
 
 
 def parameter_sizes(n_states, n_inputs, n_outputs, rank, n_coefficients):
@@ -83,14 +84,6 @@ def _step(A, B, C, D, W, x, u, g, y, x_next):
 
 
 @njit(cache=True)
-def _escaped(x):
-    for i in range(x.shape[0]):
-        if not np.isfinite(x[i]) or abs(x[i]) > DIVERGENCE_BOUND:
-            return True
-    return False
-
-
-@njit(cache=True)
 def simulate_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
     """Free-run simulation of every sequence.
 
@@ -142,7 +135,7 @@ def simulate_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
             _branches(s, V, coefficients, z, g, dg)
             X[t] = x
             _step(A, B, C, D, W, x, U[t], g, Y[t], x_next)
-            if t + 1 < starts[k + 1] and _escaped(x_next):
+            if t + 1 < starts[k + 1] and out_of_bounds(x_next, DIVERGENCE_BOUND):
                 diverged = True
                 break
             x[:] = x_next
@@ -245,7 +238,7 @@ def jacobian_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
                     power *= z[l]
             _step(A, B, C, D, W, x, U[t], g, Y[t], x_next)
             dY[t] = out[n:]
-            if t + 1 < starts[k + 1] and _escaped(x_next):
+            if t + 1 < starts[k + 1] and out_of_bounds(x_next, DIVERGENCE_BOUND):
                 diverged = True
                 break
             x[:] = x_next

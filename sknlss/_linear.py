@@ -25,6 +25,7 @@ from scipy.linalg import solve_discrete_lyapunov
 from sklearn.exceptions import ConvergenceWarning
 
 from ._base import DIVERGENCE_BOUND
+from ._kernels import out_of_bounds
 from ._optimize import LMResult, levenberg_marquardt
 
 # Spectral radius allowed for any fitted BLA whatever the data: the model must
@@ -353,11 +354,7 @@ def _simulate_kernel(A, B, C, D, U, starts, x0, bound):
     for k in range(starts.shape[0] - 1):
         x = x0[k].copy()
         for t in range(starts[k], starts[k + 1]):
-            ok = True
-            for i in range(n):
-                if not np.abs(x[i]) <= bound:
-                    ok = False
-            if not ok:
+            if out_of_bounds(x, bound):
                 diverged = True
                 break
             X[t] = x

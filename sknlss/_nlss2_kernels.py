@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from ._base import DIVERGENCE_BOUND
+from ._kernels import out_of_bounds
 
 #: Activation codes understood by the kernels.
 ACTIVATIONS = {"sigmoid": 0, "tanh": 1}
@@ -64,14 +65,6 @@ def _network(x, u, W, b, v, c, n_neurons, activation, z, a, h, dh, out):
         for k in range(j * n_neurons, (j + 1) * n_neurons):
             acc += v[k] * h[k]
         out[j] = acc
-
-
-@njit(cache=True)
-def _out_of_bounds(x):
-    for i in range(x.shape[0]):
-        if not abs(x[i]) <= DIVERGENCE_BOUND:  # also catches NaN
-            return True
-    return False
 
 
 @njit(cache=True)
@@ -115,7 +108,7 @@ def simulate_nlss2(U, starts, x0, A, B, C, D, W, b, v, c, n_neurons, activation)
     for seq in range(starts.shape[0] - 1):
         x[:] = x0[seq]
         for t in range(starts[seq], starts[seq + 1]):
-            if _out_of_bounds(x):
+            if out_of_bounds(x, DIVERGENCE_BOUND):
                 diverged = True
                 break
             X[t] = x
@@ -203,7 +196,7 @@ def simulate_nlss2_jacobian(U, starts, x0, A, B, C, D, W, b, v, c, n_neurons,
             for i in range(n):
                 S[i, o_x0 + i] = 1.0
         for t in range(starts[seq], starts[seq + 1]):
-            if _out_of_bounds(x):
+            if out_of_bounds(x, DIVERGENCE_BOUND):
                 diverged = True
                 return Y, dY, diverged
             u = U[t]

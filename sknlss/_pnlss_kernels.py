@@ -27,6 +27,8 @@ recursion carries those columns only; C, D and F enter the output directly.
 import numpy as np
 from numba import njit
 
+from ._kernels import out_of_bounds
+
 
 @njit(cache=True)
 def _fill_powers(s, max_degree, powers):
@@ -65,14 +67,6 @@ def _state_derivatives(powers, exponents, n_states, out):
                     if ej:
                         value *= powers[j, ej]
             out[k, i] = value
-
-
-@njit(cache=True)
-def _out_of_bounds(x, bound):
-    for i in range(x.shape[0]):
-        if not np.abs(x[i]) <= bound:  # also catches NaN
-            return True
-    return False
 
 
 @njit(cache=True)
@@ -126,7 +120,7 @@ def simulate_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
     for seq in range(starts.shape[0] - 1):
         x[:] = x0[seq]
         for t in range(starts[seq], starts[seq + 1]):
-            if _out_of_bounds(x, bound):
+            if out_of_bounds(x, bound):
                 Y[t:starts[seq + 1]] = np.nan
                 X[t:starts[seq + 1]] = np.nan
                 diverged = True
@@ -231,7 +225,7 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
         for i in range(n_state_params - l_x0):
             sens[i, l_x0 + i] = 1.0
         for t in range(starts[seq], starts[seq + 1]):
-            if _out_of_bounds(x, bound):
+            if out_of_bounds(x, bound):
                 return Y, J, True
             s[:n] = x
             s[n:] = U[t]
