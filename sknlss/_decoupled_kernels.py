@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from ._base import DIVERGENCE_BOUND
-from ._kernels import out_of_bounds
+from ._kernels import matvec, out_of_bounds, state_space_step
 
 
 def parameter_sizes(n_states, n_inputs, n_outputs, rank, n_coefficients):
@@ -66,21 +66,11 @@ def _branches(s, V, coefficients, z, g, dg):
 
 
 @njit(cache=True)
-def _step(A, B, C, D, W, x, u, g, y, x_next):
+def _step(A, B, C, D, W, x, u, g, y, x_next, wg):
     """Output ``y = C x + D u + W_y g`` and next state ``A x + B u + W_x g`` (in place)."""
     n = A.shape[0]
-    for i in range(n + C.shape[0]):
-        acc = 0.0
-        for j in range(n):
-            acc += (A[i, j] if i < n else C[i - n, j]) * x[j]
-        for j in range(u.shape[0]):
-            acc += (B[i, j] if i < n else D[i - n, j]) * u[j]
-        for l in range(g.shape[0]):
-            acc += W[i, l] * g[l]
-        if i < n:
-            x_next[i] = acc
-        else:
-            y[i - n] = acc
+    matvec(W, g, wg)
+    state_space_step(A, B, C, D, x, u, wg[:n], wg[n:], x_next, y)
 
 
 @njit(cache=True)
@@ -126,6 +116,7 @@ def simulate_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
     dg = np.empty(rank)
     x = np.empty(n)
     x_next = np.empty(n)
+    wg = np.empty(W.shape[0])
     diverged = False
     for k in range(starts.shape[0] - 1):
         x[:] = x0[k]
@@ -134,7 +125,7 @@ def simulate_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
             s[n:] = U[t]
             _branches(s, V, coefficients, z, g, dg)
             X[t] = x
-            _step(A, B, C, D, W, x, U[t], g, Y[t], x_next)
+            _step(A, B, C, D, W, x, U[t], g, Y[t], x_next, wg)
             if t + 1 < starts[k + 1] and out_of_bounds(x_next, DIVERGENCE_BOUND):
                 diverged = True
                 break
@@ -184,6 +175,7 @@ def jacobian_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
     dg = np.empty(rank)
     x = np.empty(n)
     x_next = np.empty(n)
+    wg = np.empty(W.shape[0])
     sens = np.empty((n, n_params))
     out = np.empty((n_all, n_params))
     M = np.empty((n_all, n))
@@ -236,7 +228,7 @@ def jacobian_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
                     for i in range(n_all):
                         out[i, p] += W[i, l] * power
                     power *= z[l]
-            _step(A, B, C, D, W, x, U[t], g, Y[t], x_next)
+            _step(A, B, C, D, W, x, U[t], g, Y[t], x_next, wg)
             dY[t] = out[n:]
             if t + 1 < starts[k + 1] and out_of_bounds(x_next, DIVERGENCE_BOUND):
                 diverged = True

@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from ._base import DIVERGENCE_BOUND
-from ._kernels import out_of_bounds
+from ._kernels import out_of_bounds, state_space_step
 
 #: Activation codes understood by the kernels.
 ACTIVATIONS = {"sigmoid": 0, "tanh": 1}
@@ -114,20 +114,7 @@ def simulate_nlss2(U, starts, x0, A, B, C, D, W, b, v, c, n_neurons, activation)
             X[t] = x
             u = U[t]
             _network(x, u, W, b, v, c, n_neurons, activation, z, a, h, dh, out)
-            for r in range(n_y):
-                acc = out[n + r]
-                for i in range(n):
-                    acc += C[r, i] * x[i]
-                for i in range(n_u):
-                    acc += D[r, i] * u[i]
-                Y[t, r] = acc
-            for r in range(n):
-                acc = out[r]
-                for i in range(n):
-                    acc += A[r, i] * x[i]
-                for i in range(n_u):
-                    acc += B[r, i] * u[i]
-                x_next[r] = acc
+            state_space_step(A, B, C, D, x, u, out[:n], out[n:], x_next, Y[t])
             x[:] = x_next
     return Y, X, diverged
 
@@ -211,14 +198,9 @@ def simulate_nlss2_jacobian(U, starts, x0, A, B, C, D, W, b, v, c, n_neurons,
                         Mx[j, i] = A[j, i] + acc
                     else:
                         My[j - n, i] = C[j - n, i] + acc
-            # Output and its sensitivities.
+            state_space_step(A, B, C, D, x, u, out[:n], out[n:], x_next, Y[t])
+            # Output sensitivities.
             for r in range(n_y):
-                acc = out[n + r]
-                for i in range(n):
-                    acc += C[r, i] * x[i]
-                for i in range(n_u):
-                    acc += D[r, i] * u[i]
-                Y[t, r] = acc
                 row = dY[t, r]
                 for i in range(n):
                     m = My[r, i]
@@ -231,14 +213,8 @@ def simulate_nlss2_jacobian(U, starts, x0, A, B, C, D, W, b, v, c, n_neurons,
                     row[o_d + r * n_u + i] += u[i]
                 _add_network_terms(row, n + r, n_neurons, v, h, dh, z,
                                    o_w, o_hb, o_v, o_oc)
-            # Next state and its sensitivities.
+            # State sensitivities.
             for r in range(n):
-                acc = out[r]
-                for i in range(n):
-                    acc += A[r, i] * x[i]
-                for i in range(n_u):
-                    acc += B[r, i] * u[i]
-                x_next[r] = acc
                 row = S_next[r]
                 row[:] = 0.0
                 for i in range(n):

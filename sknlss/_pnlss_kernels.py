@@ -27,7 +27,7 @@ recursion carries those columns only; C, D and F enter the output directly.
 import numpy as np
 from numba import njit
 
-from ._kernels import out_of_bounds
+from ._kernels import matvec, out_of_bounds, state_space_step
 
 
 @njit(cache=True)
@@ -114,6 +114,8 @@ def simulate_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
     powers = np.empty((n + n_u, _max_degree(state_exponents, output_exponents) + 1))
     zeta = np.empty(state_exponents.shape[0])
     eta = np.empty(output_exponents.shape[0])
+    state_term = np.empty(n)
+    output_term = np.empty(n_y)
     x = np.empty(n)
     x_next = np.empty(n)
     diverged = False
@@ -131,24 +133,9 @@ def simulate_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
             _eval_monomials(powers, state_exponents, zeta)
             _eval_monomials(powers, output_exponents, eta)
             X[t] = x
-            for i in range(n_y):
-                acc = 0.0
-                for j in range(n):
-                    acc += C[i, j] * x[j]
-                for j in range(n_u):
-                    acc += D[i, j] * U[t, j]
-                for j in range(eta.shape[0]):
-                    acc += F[i, j] * eta[j]
-                Y[t, i] = acc
-            for i in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += A[i, j] * x[j]
-                for j in range(n_u):
-                    acc += B[i, j] * U[t, j]
-                for j in range(zeta.shape[0]):
-                    acc += E[i, j] * zeta[j]
-                x_next[i] = acc
+            matvec(E, zeta, state_term)
+            matvec(F, eta, output_term)
+            state_space_step(A, B, C, D, x, U[t], state_term, output_term, x_next, Y[t])
             x[:] = x_next
     return Y, X, diverged
 
@@ -213,6 +200,8 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
     eta = np.empty(n_eta)
     dzeta = np.empty((n_zeta, n))
     deta = np.empty((n_eta, n))
+    state_term = np.empty(n)
+    output_term = np.empty(n_y)
     jac_x = np.empty((n, n))
     jac_y = np.empty((n_y, n))
     x = np.empty(n)
@@ -246,40 +235,26 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
                     for k in range(n_eta):
                         acc += F[i, k] * deta[k, j]
                     jac_y[i, j] = acc
-            # Output and its sensitivity.
+            matvec(E, zeta, state_term)
+            matvec(F, eta, output_term)
+            state_space_step(A, B, C, D, x, U[t], state_term, output_term, x_next, Y[t])
+            # Output sensitivity.
             row = jacobian_rows[t]
-            for i in range(n_y):
-                acc = 0.0
-                for j in range(n):
-                    acc += C[i, j] * x[j]
-                for j in range(n_u):
-                    acc += D[i, j] * U[t, j]
-                for j in range(n_eta):
-                    acc += F[i, j] * eta[j]
-                Y[t, i] = acc
-                if row < 0:
-                    continue
-                for col in range(n_state_params):
-                    acc = 0.0
+            if row >= 0:
+                for i in range(n_y):
+                    for col in range(n_state_params):
+                        acc = 0.0
+                        for j in range(n):
+                            acc += jac_y[i, j] * sens[j, col]
+                        J[row, i, global_col[col]] = acc
                     for j in range(n):
-                        acc += jac_y[i, j] * sens[j, col]
-                    J[row, i, global_col[col]] = acc
-                for j in range(n):
-                    J[row, i, o_c + i * n + j] = x[j]
-                for j in range(n_u):
-                    J[row, i, o_d + i * n_u + j] = U[t, j]
-                for j in range(n_eta):
-                    J[row, i, o_f + i * n_eta + j] = eta[j]
-            # State update and its sensitivity.
+                        J[row, i, o_c + i * n + j] = x[j]
+                    for j in range(n_u):
+                        J[row, i, o_d + i * n_u + j] = U[t, j]
+                    for j in range(n_eta):
+                        J[row, i, o_f + i * n_eta + j] = eta[j]
+            # State sensitivity.
             for i in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += A[i, j] * x[j]
-                for j in range(n_u):
-                    acc += B[i, j] * U[t, j]
-                for j in range(n_zeta):
-                    acc += E[i, j] * zeta[j]
-                x_next[i] = acc
                 for col in range(n_state_params):
                     acc = 0.0
                     for j in range(n):
