@@ -113,6 +113,32 @@ def holdout_masks(starts, n_transient, validation_fraction):
     return fit_mask, validation_mask
 
 
+def part_before_holdout(U, Y, starts, fit_mask):
+    """Each sequence from its start to its last fitted row, concatenated.
+
+    With masks from :func:`holdout_masks`, these are the sequences cut before
+    their held-out tails (their transients kept): the initialisations of the
+    nonlinear models see only these rows, so the tails stay unseen until the
+    iterate selection.
+
+    Returns
+    -------
+    U_part, Y_part : ndarray
+        The kept rows, C-contiguous.
+    starts_part : ndarray of shape (n_kept_sequences + 1,)
+        Boundaries of the kept parts; sequences without a fitted row are dropped.
+    """
+    segments = []
+    for begin, end in zip(starts[:-1], starts[1:]):
+        fitted = np.flatnonzero(fit_mask[begin:end])
+        if fitted.size:
+            segments.append((begin, begin + fitted[-1] + 1))
+    rows = np.concatenate([np.arange(begin, end) for begin, end in segments])
+    lengths = [end - begin for begin, end in segments]
+    starts_part = np.cumsum([0] + lengths).astype(np.int64)
+    return np.ascontiguousarray(U[rows]), np.ascontiguousarray(Y[rows]), starts_part
+
+
 def _robust_scale(values):
     """Standard deviation per column, with 1 where a column is (nearly) constant."""
     scale = values.std(axis=0)

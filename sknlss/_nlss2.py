@@ -25,7 +25,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.parallel import Parallel, delayed
 from threadpoolctl import threadpool_limits
 
-from ._base import _BaseStateSpace, holdout_masks
+from ._base import _BaseStateSpace, holdout_masks, part_before_holdout
 from ._bla import BLAEstimator
 from ._nlss2_kernels import ACTIVATIONS, simulate_nlss2, simulate_nlss2_jacobian
 from ._optimize import levenberg_marquardt
@@ -86,23 +86,6 @@ def _broadcast_x0(model, n_sequences):
 
 
 # ------------------------------------------------------ static initialisation
-def _fitted_part(U, Y, starts, fit_mask):
-    """Rows from each sequence's start to its last fitted row, concatenated.
-
-    The state estimate and the static regression see only these rows, so the
-    held-out tail of every sequence stays unseen.
-    """
-    segments = []
-    for begin, end in zip(starts[:-1], starts[1:]):
-        fitted = np.flatnonzero(fit_mask[begin:end])
-        if fitted.size:
-            segments.append((begin, begin + fitted[-1] + 1))
-    rows = np.concatenate([np.arange(b, e) for b, e in segments])
-    lengths = np.array([e - b for b, e in segments])
-    starts_fit = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)
-    return U[rows], Y[rows], starts_fit
-
-
 def _fit_networks(states, U, Y, starts, linear, n_neurons, activation, random_state):
     """Fit one network per component of f_NL and g_NL (paper eq. 15-16).
 
@@ -224,7 +207,7 @@ def select_alpha(U, Y, starts, linear, alphas, *, fit_mask, validation_mask=None
         Mean squared simulation error of each candidate (``inf`` if divergent).
     """
     rows = validation_mask if validation_mask is not None and validation_mask.any() else fit_mask
-    U_fit, Y_fit, starts_fit = _fitted_part(U, Y, starts, fit_mask)
+    U_fit, Y_fit, starts_fit = part_before_holdout(U, Y, starts, fit_mask)
     seed = check_random_state(random_state).randint(np.iinfo(np.int32).max)
     losses = []
     for alpha in alphas:
@@ -337,7 +320,7 @@ def _fit_one_start(U, Y, starts, fit_mask, validation_mask, linear, alpha, seed,
                    n_neurons, activation, estimate_x0, weight_decay, max_iter, tol, verbose,
                    label):
     """Initialise from the estimated states with one random seed, then optimise."""
-    U_fit, Y_fit, starts_fit = _fitted_part(U, Y, starts, fit_mask)
+    U_fit, Y_fit, starts_fit = part_before_holdout(U, Y, starts, fit_mask)
     model = _initial_model(U_fit, Y_fit, starts_fit, linear, alpha, n_neurons,
                            activation, seed)
     if not estimate_x0:
@@ -573,7 +556,7 @@ class NLSS2Regressor(_BaseStateSpace):
     def _fit_normalized(self, U, Y, starts):
         fit_mask, validation_mask = holdout_masks(starts, self.n_transient,
                                                   self.validation_fraction)
-        U_fit, Y_fit, starts_fit = _fitted_part(U, Y, starts, fit_mask)
+        U_fit, Y_fit, starts_fit = part_before_holdout(U, Y, starts, fit_mask)
         bla = clone(self.bla if self.bla is not None else BLAEstimator())
         bla.set_params(n_states=self.n_states)
         bla._fit_normalized(U_fit, Y_fit, starts_fit)

@@ -13,7 +13,7 @@ import numpy as np
 from sklearn.base import clone
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
-from ._base import DIVERGENCE_BOUND, _BaseStateSpace, holdout_masks
+from ._base import DIVERGENCE_BOUND, _BaseStateSpace, holdout_masks, part_before_holdout
 from ._bla import BLAEstimator
 from ._optimize import levenberg_marquardt
 from ._pnlss_kernels import jacobian_pnlss, simulate_pnlss
@@ -426,7 +426,7 @@ class PNLSSRegressor(_BaseStateSpace):
                 f"of periods; got sequence lengths {lengths.tolist()}."
             )
 
-    def _fit_linear(self, U, Y, starts, fit_rows):
+    def _fit_linear(self, U, Y, starts, fit_mask):
         """Fit the BLA template on the rows before the held-out tails."""
         bla = clone(self.bla if self.bla is not None else BLAEstimator())
         params = bla.get_params()
@@ -435,12 +435,7 @@ class PNLSSRegressor(_BaseStateSpace):
             bla.set_params(estimate_x0=True)
         if self.period is not None and params.get("period", 0) is None:
             bla.set_params(period=self.period)
-        kept = np.cumsum(
-            [0] + [int(fit_rows[b:e].sum()) for b, e in zip(starts[:-1], starts[1:])]
-        ).astype(np.int64)
-        bla._fit_normalized(
-            np.ascontiguousarray(U[fit_rows]), np.ascontiguousarray(Y[fit_rows]), kept
-        )
+        bla._fit_normalized(*part_before_holdout(U, Y, starts, fit_mask))
         # Same coordinates as this model: it predicts in the user's units too.
         for name in ("n_features_in_", "n_outputs_", "_y_was_1d", "u_offset_",
                      "u_scale_", "y_offset_", "y_scale_"):
@@ -463,8 +458,7 @@ class PNLSSRegressor(_BaseStateSpace):
         fit_mask, val_mask = holdout_masks(
             starts, 0 if periodic else self.n_transient, self.validation_fraction
         )
-        before_tail = holdout_masks(starts, 0, self.validation_fraction)[0]
-        self.bla_ = self._fit_linear(U, Y, starts, before_tail)
+        self.bla_ = self._fit_linear(U, Y, starts, fit_mask)
 
         if periodic and self.n_transient:
             index, sim_starts, original = _steady_state_rows(starts, self.n_transient)
