@@ -81,7 +81,7 @@ def _initial_parameters(pnlss, V, W, c, estimate_x0):
 
 def _fit_one_start(pnlss, U, Y, starts, fit_mask, val_mask, seed, *, rank, degree,
                    sampling, n_sampling_points, n_restarts, estimate_x0, max_iter, tol,
-                   verbose, label):
+                   verbose, label, n_iter_no_change=None):
     """Decouple the fitted PNLSS with one random draw, then re-optimise.
 
     Returns the parameter matrices ``(A, B, C, D, V, W, c)``, ``x0``, the
@@ -146,6 +146,7 @@ def _fit_one_start(pnlss, U, Y, starts, fit_mask, val_mask, seed, *, rank, degre
             break
     result = levenberg_marquardt(
         residual, theta0, validation_loss=validation_loss, max_iter=max_iter, tol=tol,
+        n_iter_no_change=n_iter_no_change,
         # Similarity transforms of the states and the scaling of each branch's
         # input and output leave the simulated output unchanged.
         n_drop=n * n + 2 * rank, verbose=verbose, label=label,
@@ -214,6 +215,11 @@ class DecoupledPNLSS(_BaseStateSpace):
         Fraction at the end of every sequence held out from the cost; the
         iterate with the lowest simulation error there is kept. 0 keeps the
         last iterate.
+    n_iter_no_change : int, default=None
+        Stop a search once the validation loss has not improved for this many
+        iterations (early stopping; it has no effect when
+        ``validation_fraction=0``). ``None`` iterates until ``max_iter`` or
+        ``tol``.
     n_restarts : int, default=10
         Number of random initialisations of the CPD within one start.
     n_init : int, default=1
@@ -317,6 +323,7 @@ class DecoupledPNLSS(_BaseStateSpace):
         "max_iter": [Interval(Integral, 0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "validation_fraction": [Interval(Real, 0, 1, closed="left")],
+        "n_iter_no_change": [Interval(Integral, 1, None, closed="left"), None],
         "n_restarts": [Interval(Integral, 1, None, closed="left")],
         "n_init": [Interval(Integral, 1, None, closed="left")],
         "n_jobs": [Integral, None],
@@ -337,6 +344,7 @@ class DecoupledPNLSS(_BaseStateSpace):
         max_iter=100,
         tol=1e-9,
         validation_fraction=0.0,
+        n_iter_no_change=None,
         n_restarts=10,
         n_init=1,
         n_jobs=None,
@@ -354,6 +362,7 @@ class DecoupledPNLSS(_BaseStateSpace):
         self.max_iter = max_iter
         self.tol = tol
         self.validation_fraction = validation_fraction
+        self.n_iter_no_change = n_iter_no_change
         self.n_restarts = n_restarts
         self.n_init = n_init
         self.n_jobs = n_jobs
@@ -403,6 +412,7 @@ class DecoupledPNLSS(_BaseStateSpace):
             rank=self.rank, degree=degree, sampling=self.sampling,
             n_sampling_points=self.n_sampling_points, n_restarts=self.n_restarts,
             estimate_x0=bool(self.estimate_x0), max_iter=self.max_iter, tol=self.tol,
+            n_iter_no_change=self.n_iter_no_change,
             verbose=self.verbose,
         )
         runs = Parallel(n_jobs=self.n_jobs)(

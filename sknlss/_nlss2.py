@@ -222,7 +222,8 @@ def select_alpha(U, Y, starts, linear, alphas, *, fit_mask, validation_mask=None
 
 # --------------------------------------------------------------- optimisation
 def _optimise(model, U, Y, starts, fit_mask, validation_mask, *, n_neurons, activation,
-              estimate_x0, weight_decay, max_iter, tol, verbose, label, linear_only=False):
+              estimate_x0, weight_decay, max_iter, tol, verbose, label,
+              n_iter_no_change=None, linear_only=False):
     """Simulation-error minimisation of all parameters (paper eq. 18).
 
     With ``weight_decay``, the cost also holds ``weight_decay * n_residuals``
@@ -288,7 +289,8 @@ def _optimise(model, U, Y, starts, fit_mask, validation_mask, *, n_neurons, acti
     result = levenberg_marquardt(
         residual, theta_full[free],
         validation_loss=validation_loss if validation_mask.any() else None,
-        max_iter=max_iter, tol=tol, n_drop=n_drop, verbose=verbose, label=label,
+        max_iter=max_iter, tol=tol, n_drop=n_drop, n_iter_no_change=n_iter_no_change,
+        verbose=verbose, label=label,
     )
     fitted = current(result.theta)[0]
     if not estimate_x0:
@@ -297,7 +299,7 @@ def _optimise(model, U, Y, starts, fit_mask, validation_mask, *, n_neurons, acti
 
 
 def _refine_linear(linear, U, Y, starts, fit_mask, validation_mask, *, estimate_x0,
-                   max_iter, tol, verbose):
+                   max_iter, tol, verbose, n_iter_no_change=None):
     """The linear model refined by simulation-error minimisation.
 
     The same search as the full optimisation with the networks switched off
@@ -311,14 +313,15 @@ def _refine_linear(linear, U, Y, starts, fit_mask, validation_mask, *, estimate_
     model.update(A=A, B=B, C=C, D=D)
     fitted, _ = _optimise(model, U, Y, starts, fit_mask, validation_mask, n_neurons=1,
                           activation="sigmoid", estimate_x0=estimate_x0, weight_decay=0.0,
-                          max_iter=max_iter, tol=tol, verbose=verbose,
+                          max_iter=max_iter, tol=tol, n_iter_no_change=n_iter_no_change,
+                          verbose=verbose,
                           label="NLSS2 linear", linear_only=True)
     return tuple(fitted[k].copy() for k in "ABCD")
 
 
 def _fit_one_start(U, Y, starts, fit_mask, validation_mask, linear, alpha, seed, *,
                    n_neurons, activation, estimate_x0, weight_decay, max_iter, tol, verbose,
-                   label):
+                   label, n_iter_no_change=None):
     """Initialise from the estimated states with one random seed, then optimise."""
     U_fit, Y_fit, starts_fit = part_before_holdout(U, Y, starts, fit_mask)
     model = _initial_model(U_fit, Y_fit, starts_fit, linear, alpha, n_neurons,
@@ -333,7 +336,8 @@ def _fit_one_start(U, Y, starts, fit_mask, validation_mask, linear, alpha, seed,
         model["c"] = np.zeros_like(model["c"])
     return _optimise(model, U, Y, starts, fit_mask, validation_mask, n_neurons=n_neurons,
                      activation=activation, estimate_x0=estimate_x0,
-                     weight_decay=weight_decay, max_iter=max_iter, tol=tol, verbose=verbose,
+                     weight_decay=weight_decay, max_iter=max_iter, tol=tol,
+                     n_iter_no_change=n_iter_no_change, verbose=verbose,
                      label=label)
 
 
@@ -396,6 +400,11 @@ class NLSS2Regressor(_BaseStateSpace):
     validation_fraction : float in [0, 1), default=0.0
         Fraction at the end of every sequence held out to select ``alpha``,
         the iteration and the start. ``0`` selects on the training cost.
+    n_iter_no_change : int, default=None
+        Stop a search once the validation loss has not improved for this many
+        iterations (early stopping; it has no effect when
+        ``validation_fraction=0``). ``None`` iterates until ``max_iter`` or
+        ``tol``.
     n_init : int, default=1
         Number of random initialisations of the networks, optimised in
         parallel; the best one is kept.
@@ -525,6 +534,7 @@ class NLSS2Regressor(_BaseStateSpace):
         "max_iter": [Interval(Integral, 0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "validation_fraction": [Interval(Real, 0, 1, closed="left")],
+        "n_iter_no_change": [Interval(Integral, 1, None, closed="left"), None],
         "n_init": [Interval(Integral, 1, None, closed="left")],
         "n_jobs": [Integral, None],
         "random_state": ["random_state"],
@@ -534,7 +544,8 @@ class NLSS2Regressor(_BaseStateSpace):
     def __init__(self, n_states=2, *, alpha=0.3, n_neurons=2, activation="sigmoid",
                  estimate_x0=False, weight_decay=0.0, refine_linear=False, bla=None,
                  max_iter=100, tol=1e-9,
-                 validation_fraction=0.0, n_init=1, n_jobs=None, random_state=None,
+                 validation_fraction=0.0, n_iter_no_change=None, n_init=1, n_jobs=None,
+                 random_state=None,
                  n_transient=0, verbose=0):
         self.n_states = n_states
         self.alpha = alpha
@@ -547,6 +558,7 @@ class NLSS2Regressor(_BaseStateSpace):
         self.max_iter = max_iter
         self.tol = tol
         self.validation_fraction = validation_fraction
+        self.n_iter_no_change = n_iter_no_change
         self.n_init = n_init
         self.n_jobs = n_jobs
         self.random_state = random_state
@@ -565,7 +577,8 @@ class NLSS2Regressor(_BaseStateSpace):
         if self.refine_linear:
             linear = _refine_linear(linear, U, Y, starts, fit_mask, validation_mask,
                                     estimate_x0=self.estimate_x0, max_iter=self.max_iter,
-                                    tol=self.tol, verbose=self.verbose)
+                                    tol=self.tol, n_iter_no_change=self.n_iter_no_change,
+                                    verbose=self.verbose)
 
         rng = check_random_state(self.random_state)
         seeds = rng.randint(np.iinfo(np.int32).max, size=self.n_init)
@@ -581,7 +594,8 @@ class NLSS2Regressor(_BaseStateSpace):
 
         options = dict(n_neurons=self.n_neurons, activation=self.activation,
                        estimate_x0=self.estimate_x0, weight_decay=self.weight_decay,
-                       max_iter=self.max_iter, tol=self.tol, verbose=self.verbose)
+                       max_iter=self.max_iter, tol=self.tol,
+                       n_iter_no_change=self.n_iter_no_change, verbose=self.verbose)
         runs = Parallel(n_jobs=self.n_jobs)(
             delayed(_fit_one_start)(U, Y, starts, fit_mask, validation_mask, linear,
                                     self.alpha_, seed, label=f"NLSS2 start {i}", **options)

@@ -45,6 +45,8 @@ class LMResult:
         Number of accepted steps.
     converged : bool
         False when the iteration limit stopped the search.
+    stopped_early : bool
+        True when the validation loss stopped improving (``n_iter_no_change``).
     """
 
     theta: np.ndarray
@@ -53,6 +55,7 @@ class LMResult:
     best_iter: int
     n_iter: int
     converged: bool
+    stopped_early: bool = False
 
 
 def _scaled_step_factors(J, r):
@@ -105,6 +108,7 @@ def levenberg_marquardt(
     max_iter=100,
     tol=1e-9,
     n_drop=0,
+    n_iter_no_change=None,
     verbose=0,
     label="LM",
 ):
@@ -128,6 +132,10 @@ def levenberg_marquardt(
     n_drop : int, default=0
         Number of smallest singular values of the scaled Jacobian to discard
         (``n_states**2`` removes the similarity-transform invariance).
+    n_iter_no_change : int, default=None
+        With ``validation_loss``, stop once this many accepted steps in a row
+        have not lowered the best validation loss (early stopping). ``None``
+        runs until ``max_iter`` or ``tol``.
     verbose : int, default=0
         Print one line per iteration when positive.
     label : str, default="LM"
@@ -154,7 +162,7 @@ def levenberg_marquardt(
         val_losses = [best_val]
 
     damping = None
-    converged = False
+    converged = stopped_early = False
     n_iter = 0
     with threadpool_limits(limits=1, user_api="blas"):
         while n_iter < max_iter:
@@ -194,6 +202,10 @@ def levenberg_marquardt(
             if decrease < tol:
                 converged = True
                 break
+            if (validation_loss is not None and n_iter_no_change is not None
+                    and n_iter - best_iter >= n_iter_no_change):
+                converged = stopped_early = True
+                break
     if validation_loss is None:
         best_theta, best_iter = theta, n_iter
     if not converged and max_iter > 0:
@@ -210,4 +222,5 @@ def levenberg_marquardt(
         best_iter=best_iter,
         n_iter=n_iter,
         converged=converged,
+        stopped_early=stopped_early,
     )

@@ -285,6 +285,11 @@ class PNLSSRegressor(_BaseStateSpace):
         iterate with the lowest simulation error there is kept (the held-out
         tail continues the simulation of the fitted part). 0 keeps the last
         iterate.
+    n_iter_no_change : int, default=None
+        Stop once the validation loss has not improved for this many
+        iterations (early stopping; it has no effect when
+        ``validation_fraction=0``). ``None`` iterates until ``max_iter`` or
+        ``tol``.
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state.
@@ -368,6 +373,7 @@ class PNLSSRegressor(_BaseStateSpace):
         "max_iter": [Interval(Integral, 0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "validation_fraction": [Interval(Real, 0, 1, closed="left")],
+        "n_iter_no_change": [Interval(Integral, 1, None, closed="left"), None],
         "verbose": ["verbose"],
     }
 
@@ -387,6 +393,7 @@ class PNLSSRegressor(_BaseStateSpace):
         max_iter=100,
         tol=1e-9,
         validation_fraction=0.0,
+        n_iter_no_change=None,
         n_transient=0,
         verbose=0,
     ):
@@ -403,6 +410,7 @@ class PNLSSRegressor(_BaseStateSpace):
         self.max_iter = max_iter
         self.tol = tol
         self.validation_fraction = validation_fraction
+        self.n_iter_no_change = n_iter_no_change
         self.n_transient = n_transient
         self.verbose = verbose
 
@@ -481,7 +489,8 @@ class PNLSSRegressor(_BaseStateSpace):
         if self.estimate_x0:
             blocks.append(bla.x0_)
         theta = np.concatenate([np.asarray(b, dtype=np.float64).ravel() for b in blocks])
-        lm_options = dict(tol=self.tol, n_drop=n * n, verbose=self.verbose)
+        lm_options = dict(tol=self.tol, n_drop=n * n, n_iter_no_change=self.n_iter_no_change,
+                          verbose=self.verbose)
         if self.refine_linear and self.max_iter > 0:
             # Linear parameters (and x0) only: a poor nonparametric BLA, e.g. on
             # a short record, would otherwise start the nonlinear search far away.

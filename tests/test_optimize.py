@@ -1,0 +1,89 @@
+import warnings
+
+import numpy as np
+import pytest
+from sklearn.exceptions import ConvergenceWarning
+
+from sknlss import DecoupledPNLSS, NLSS2Regressor, PNLSSRegressor
+from sknlss._optimize import levenberg_marquardt
+
+
+def _rosenbrock(theta, jacobian):
+    r = np.array([10.0 * (theta[1] - theta[0] ** 2), 1.0 - theta[0]])
+    if not jacobian:
+        return r, None
+    return r, np.array([[-20.0 * theta[0], 10.0], [-1.0, 0.0]])
+
+
+def _distance_to_start(theta):
+    # A validation loss that is best near the start, so that the search moves
+    # away from the validation optimum as it converges to the training one.
+    return float(np.sum((theta - [-1.2, 1.0]) ** 2))
+
+
+def test_minimises_a_nonlinear_least_squares_problem():
+    result = levenberg_marquardt(_rosenbrock, np.array([-1.2, 1.0]), max_iter=200, tol=1e-15)
+    np.testing.assert_allclose(result.theta, [1.0, 1.0], atol=1e-6)
+    assert result.converged and not result.stopped_early
+    assert np.all(np.diff(result.loss_history) < 0)
+    assert result.best_iter == result.n_iter
+
+
+def test_iteration_limit_warns():
+    with pytest.warns(ConvergenceWarning, match="max_iter=2"):
+        result = levenberg_marquardt(_rosenbrock, np.array([-1.2, 1.0]), max_iter=2)
+    assert result.n_iter == 2 and not result.converged
+
+
+@pytest.mark.parametrize("patience", [1, 3])
+def test_early_stopping_on_the_validation_loss(patience):
+    start = np.array([-1.2, 1.0])
+    full = levenberg_marquardt(_rosenbrock, start, validation_loss=_distance_to_start,
+                               max_iter=200, tol=1e-15)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ConvergenceWarning)
+        early = levenberg_marquardt(_rosenbrock, start, validation_loss=_distance_to_start,
+                                    max_iter=200, tol=1e-15, n_iter_no_change=patience)
+    assert early.stopped_early and early.converged
+    assert early.n_iter == early.best_iter + patience < full.n_iter
+    # Same search up to the stop, and the same selected iterate.
+    np.testing.assert_array_equal(early.loss_history, full.loss_history[: early.n_iter + 1])
+    assert early.best_iter == full.best_iter
+    np.testing.assert_array_equal(early.theta, full.theta)
+
+
+def test_early_stopping_needs_a_validation_loss():
+    result = levenberg_marquardt(_rosenbrock, np.array([-1.2, 1.0]), max_iter=200,
+                                 tol=1e-15, n_iter_no_change=1)
+    assert not result.stopped_early and result.best_iter == result.n_iter > 1
+
+
+def _quadratic_system(u):
+    y = np.empty(len(u))
+    x = 0.0
+    for t, ut in enumerate(u[:, 0]):
+        y[t] = x
+        x = 0.6 * x + ut + 0.2 * x**2
+    return y
+
+
+@pytest.mark.parametrize(
+    "estimator",
+    [
+        PNLSSRegressor(1, degree=2),
+        NLSS2Regressor(1, random_state=0),
+        DecoupledPNLSS(1, rank=1, pnlss=PNLSSRegressor(degree=2, max_iter=5), random_state=0),
+    ],
+    ids=["PNLSS", "NLSS2", "Decoupled"],
+)
+def test_estimators_stop_early(estimator):
+    rng = np.random.default_rng(0)
+    u = 0.3 * rng.normal(size=(300, 1))
+    y = _quadratic_system(u) + 0.05 * rng.normal(size=300)
+    estimator.set_params(validation_fraction=0.3, n_iter_no_change=2, max_iter=200, tol=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        estimator.fit(u, y)
+    history = estimator.validation_loss_history_
+    assert estimator.n_iter_ < 200
+    assert estimator.n_iter_ == int(np.argmin(history)) + 2
