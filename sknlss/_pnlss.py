@@ -16,8 +16,8 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from ._base import DIVERGENCE_BOUND, _BaseStateSpace, holdout_masks, part_before_holdout
 from ._bla import BLAEstimator
 from ._optimize import levenberg_marquardt
-from ._pnlss_kernels import jacobian_pnlss, simulate_pnlss
-from ._polynomial import monomial_exponents
+from ._pnlss_kernels import jacobian_pnlss, monomial_state_derivatives, simulate_pnlss
+from ._polynomial import evaluate_monomials, monomial_exponents
 
 _TERM_OPTIONS = {"full", "states_only", "no_cross_products", "inputs_only"}
 
@@ -123,6 +123,33 @@ def _frequency_rows(values, blocks, period, weights):
     return np.concatenate(parts)
 
 
+def _local_spectral_radius(A, E, state_exponents, S):
+    """Spectral radius of the state map's Jacobian at each row of ``S``.
+
+    The Jacobian of ``x -> A x + B u + E zeta(x, u)`` with respect to x is
+    ``J(t) = A + E dzeta/dx(s(t))`` for the rows ``s(t) = [x(t); u(t)]`` of
+    ``S``. Returns the spectral radii (n_rows,) and their derivatives with
+    respect to the entries of J, of shape (n_rows, n, n), from the
+    eigenvector formula ``d lambda = w^H dJ v / (w^H v)`` for the eigenvalue
+    of largest modulus; and the monomial derivatives (n_rows, n_zeta, n)
+    that carry these to E.
+    """
+    n = A.shape[0]
+    dzeta = monomial_state_derivatives(np.ascontiguousarray(S), state_exponents, n)
+    J = A + np.einsum("iz,tzj->tij", E, dzeta)
+    eigenvalues, right = np.linalg.eig(J)
+    rows = np.arange(len(S))
+    top = np.argmax(np.abs(eigenvalues), axis=1)
+    largest = eigenvalues[rows, top]
+    radius = np.abs(largest)
+    # Rows of the inverse of the right eigenvectors are the left eigenvectors
+    # normalised so that w^H v = 1.
+    left = np.linalg.inv(right)[rows, top]
+    phase = np.conj(largest) / np.maximum(radius, np.finfo(float).tiny)
+    gradient = np.real(phase[:, None, None] * left[:, :, None] * right[rows, :, top][:, None, :])
+    return radius, gradient, dzeta
+
+
 class _PNLSSProblem:
     """Simulation-error least-squares problem of a PNLSS model.
 
@@ -132,7 +159,8 @@ class _PNLSSProblem:
     """
 
     def __init__(self, U, Y, starts, state_exponents, output_exponents, n_states,
-                 estimate_x0, fit_rows, val_rows, period):
+                 estimate_x0, fit_rows, val_rows, period, stability_penalty=0.0,
+                 weight_decay=0.0):
         n_u, n_y = U.shape[1], Y.shape[1]
         n = n_states
         self.U, self.Y, self.starts = U, Y, starts
@@ -158,6 +186,11 @@ class _PNLSSProblem:
             self.weights = _output_noise_weights(Y_fit, self.blocks, period)
             self.target = _frequency_rows(Y_fit, self.blocks, period, self.weights).ravel()
         self.validation_loss = self._validation_loss if val_rows.any() else None
+        self.stability_penalty = stability_penalty
+        self.weight_decay = weight_decay
+        self.coefficient_scale = None
+        sizes = [rows * cols for rows, cols in self.shapes]
+        self.polynomial_columns = np.arange(sum(sizes[:4]), sum(sizes))
 
     def unpack(self, theta):
         return _unpack(theta, self.shapes, self.estimate_x0)
@@ -169,12 +202,72 @@ class _PNLSSProblem:
         n_x0 = self.n_states if self.estimate_x0 else 0
         return np.r_[np.arange(n_linear), np.arange(n_total, n_total + n_x0)]
 
+    def _initial_states(self, x0):
+        if x0 is None:
+            return np.zeros((self.n_sequences, self.n_states))
+        return np.ascontiguousarray(np.broadcast_to(x0, (self.n_sequences, x0.size)))
+
+    def states(self, theta):
+        """Simulated ``[x; u]`` at the cost rows, or None when the simulation diverged."""
+        matrices, x0 = self.unpack(theta)
+        _, X, diverged = simulate_pnlss(*matrices, *self.exponents, self.U, self.starts,
+                                        self._initial_states(x0), DIVERGENCE_BOUND)
+        if diverged:
+            return None
+        return np.hstack([X, self.U])[self.fit_rows]
+
+    def set_coefficient_scale(self, theta):
+        """Scale the weight decay of each coefficient of E and F by the RMS of its
+        monomial along the trajectory of ``theta`` (the initial model), so that
+        the decay acts on the size of each term's contribution."""
+        S = self.states(theta)
+        rms = [np.sqrt(np.mean(evaluate_monomials(S, exponents) ** 2, axis=0))
+               for exponents in self.exponents]
+        self.coefficient_scale = np.concatenate(
+            [np.tile(rms[0], self.shapes[4][0]), np.tile(rms[1], self.shapes[5][0])]
+        )
+
+    def _penalty_rows(self, theta, n_residuals, jacobian):
+        """Residual rows (and their Jacobian) of the stability penalty and the
+        weight decay, both relative to the mean squared residual.
+
+        The stability rows are the excess over 1 of the local spectral radius
+        of the state map along the fitted trajectory. Their Jacobian holds the
+        direct dependence on A and E; the states' own dependence on the
+        parameters is neglected (a Gauss-Newton-type approximation: the cost
+        itself is exact, so every accepted step still lowers it).
+        """
+        rows, jacobians = [], []
+        if self.stability_penalty:
+            (A, _, _, _, E, _), _ = self.unpack(theta)
+            S = self.states(theta)
+            if S is None:
+                return None, None
+            radius, gradient, dzeta = _local_spectral_radius(A, E, self.exponents[0], S)
+            excess = np.maximum(radius - 1.0, 0.0)
+            weight = np.sqrt(self.stability_penalty * n_residuals / len(S))
+            rows.append(weight * excess)
+            if jacobian:
+                gradient *= (weight * (excess > 0))[:, None, None]
+                J = np.zeros((len(S), theta.size))
+                J[:, : A.size] = gradient.reshape(len(S), -1)
+                start = self.polynomial_columns[0]
+                J[:, start : start + E.size] = np.einsum(
+                    "tij,tzj->tiz", gradient, dzeta
+                ).reshape(len(S), -1)
+                jacobians.append(J)
+        if self.weight_decay:
+            weight = np.sqrt(self.weight_decay * n_residuals) * self.coefficient_scale
+            rows.append(weight * theta[self.polynomial_columns])
+            if jacobian:
+                J = np.zeros((weight.size, theta.size))
+                J[np.arange(weight.size), self.polynomial_columns] = weight
+                jacobians.append(J)
+        return np.concatenate(rows), (np.vstack(jacobians) if jacobian else None)
+
     def simulate(self, theta, jacobian):
         matrices, x0 = self.unpack(theta)
-        if x0 is None:
-            x0 = np.zeros((self.n_sequences, self.n_states))
-        else:
-            x0 = np.ascontiguousarray(np.broadcast_to(x0, (self.n_sequences, x0.size)))
+        x0 = self._initial_states(x0)
         if jacobian:
             return jacobian_pnlss(*matrices, *self.exponents, self.U, self.starts, x0,
                                   self.estimate_x0, DIVERGENCE_BOUND, self.jacobian_rows)
@@ -194,7 +287,16 @@ class _PNLSSProblem:
             r -= self.target
             if jacobian:
                 J = _frequency_rows(J, self.blocks, self.period, self.weights)
-        return r, (J.reshape(r.size, -1) if jacobian else None)
+        if jacobian:
+            J = J.reshape(r.size, -1)
+        if self.stability_penalty or self.weight_decay:
+            r_penalty, J_penalty = self._penalty_rows(theta, r.size, jacobian)
+            if r_penalty is None:
+                return None, None
+            r = np.concatenate([r, r_penalty])
+            if jacobian:
+                J = np.vstack([J, J_penalty])
+        return r, J
 
     def restricted(self, theta, free):
         """Residual function of the parameters ``free`` only, the others fixed at ``theta``."""
@@ -271,6 +373,19 @@ class PNLSSRegressor(_BaseStateSpace):
         weighted by the inverse noise standard deviation (paper eq. 17; needs
         ``period``). The noise variance comes from the variation over the
         periods of each sequence; with one period only the weights are 1.
+    stability_penalty : float, default=0.0
+        Weight of a penalty on local instability along the fitted trajectory:
+        the mean squared excess over 1 of the spectral radius of the state
+        map's Jacobian ``A + E dzeta/dx`` at every fitted sample, relative to
+        the mean squared residual. Positive values steer the search towards
+        models that are locally contracting wherever the data take the states,
+        so that they do not blow up on inputs that push the states a little
+        beyond the estimation data. 0 (the paper's cost) disables it.
+    weight_decay : float, default=0.0
+        Weight of the squared size of the polynomial terms, relative to the
+        mean squared residual: ``sum_k (c_k e_k)^2`` over the coefficients
+        ``e_k`` of E and F, with ``c_k`` the RMS of the k-th monomial along
+        the trajectory of the initial (linear) model.
     bla : estimator, default=None
         Template of the linear model used for the initialisation. It is cloned
         and given ``n_states``, ``estimate_x0=True`` for PNLSS-I (if it has
@@ -320,7 +435,8 @@ class PNLSSRegressor(_BaseStateSpace):
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
         Cost per iteration (mean squared residual; weighted spectra for
-        ``cost="frequency"``).
+        ``cost="frequency"``), including the ``stability_penalty`` and
+        ``weight_decay`` terms.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
         Mean squared simulation error on the held-out rows per iteration.
     best_iteration_ : int
@@ -369,6 +485,8 @@ class PNLSSRegressor(_BaseStateSpace):
         "refine_linear": ["boolean"],
         "period": [Interval(Integral, 1, None, closed="left"), None],
         "cost": [StrOptions({"time", "frequency"})],
+        "stability_penalty": [Interval(Real, 0, None, closed="left")],
+        "weight_decay": [Interval(Real, 0, None, closed="left")],
         "bla": [HasMethods(["fit", "get_params"]), None],
         "max_iter": [Interval(Integral, 0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
@@ -389,6 +507,8 @@ class PNLSSRegressor(_BaseStateSpace):
         refine_linear=False,
         period=None,
         cost="time",
+        stability_penalty=0.0,
+        weight_decay=0.0,
         bla=None,
         max_iter=100,
         tol=1e-9,
@@ -406,6 +526,8 @@ class PNLSSRegressor(_BaseStateSpace):
         self.refine_linear = refine_linear
         self.period = period
         self.cost = cost
+        self.stability_penalty = stability_penalty
+        self.weight_decay = weight_decay
         self.bla = bla
         self.max_iter = max_iter
         self.tol = tol
@@ -482,6 +604,7 @@ class PNLSSRegressor(_BaseStateSpace):
             self.state_exponents_, self.output_exponents_, n,
             bool(self.estimate_x0), fit_rows, val_rows,
             self.period if self.cost == "frequency" else None,
+            stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
         )
         bla = self.bla_
         blocks = [bla.A_, bla.B_, bla.C_, bla.D_, np.zeros((n, n_zeta)),
@@ -489,6 +612,8 @@ class PNLSSRegressor(_BaseStateSpace):
         if self.estimate_x0:
             blocks.append(bla.x0_)
         theta = np.concatenate([np.asarray(b, dtype=np.float64).ravel() for b in blocks])
+        if self.weight_decay:
+            problem.set_coefficient_scale(theta)
         lm_options = dict(tol=self.tol, n_drop=n * n, n_iter_no_change=self.n_iter_no_change,
                           verbose=self.verbose)
         if self.refine_linear and self.max_iter > 0:

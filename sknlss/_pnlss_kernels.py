@@ -80,6 +80,29 @@ def _max_degree(state_exponents, output_exponents):
 
 
 @njit(cache=True)
+def monomial_state_derivatives(S, exponents, n_states):
+    """Derivatives of the monomials with respect to the states at every row of S.
+
+    Parameters
+    ----------
+    S : ndarray of shape (n_rows, n + n_u)
+        Points ``[x; u]``.
+    exponents : ndarray of int64 of shape (n_terms, n + n_u)
+    n_states : int
+
+    Returns
+    -------
+    derivatives : ndarray of shape (n_rows, n_terms, n_states)
+    """
+    out = np.empty((S.shape[0], exponents.shape[0], n_states))
+    powers = np.empty((S.shape[1], _max_degree(exponents, exponents) + 1))
+    for t in range(S.shape[0]):
+        _fill_powers(S[t], powers.shape[1] - 1, powers)
+        _state_derivatives(powers, exponents, n_states, out[t])
+    return out
+
+
+@njit(cache=True)
 def simulate_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, starts,
                    x0, bound):
     """Free-run simulation of every sequence.

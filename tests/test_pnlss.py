@@ -8,9 +8,9 @@ from sklearn.exceptions import ConvergenceWarning
 import sknlss._pnlss as pnlss_module
 from sknlss import BLAEstimator, PNLSSRegressor, SimulationDivergedWarning
 from sknlss._base import DIVERGENCE_BOUND
-from sknlss._pnlss import _PNLSSProblem, _steady_state_rows
-from sknlss._pnlss_kernels import jacobian_pnlss, simulate_pnlss
-from sknlss._polynomial import evaluate_monomials, monomial_exponents
+from sknlss._pnlss import _local_spectral_radius, _PNLSSProblem, _steady_state_rows
+from sknlss._pnlss_kernels import jacobian_pnlss, monomial_state_derivatives, simulate_pnlss
+from sknlss._polynomial import evaluate_monomials, monomial_exponents, monomial_jacobian
 from sknlss.datasets import make_cascaded_tanks, make_pnlss_reference
 from sknlss.metrics import rms_error
 
@@ -137,6 +137,93 @@ def test_frequency_residual_jacobian_matches_central_differences():
         down[k] -= h
         J_fd[:, k] = (problem.residual(up, False)[0] - problem.residual(down, False)[0]) / (2 * h)
     np.testing.assert_allclose(J, J_fd, rtol=1e-6, atol=1e-6 * np.abs(J).max())
+
+
+def test_local_spectral_radius_gradient_matches_central_differences():
+    (A, _, _, _, E, _), ez, _ = _random_model(3, 1, 1, "full", "full", seed=5)
+    E *= 10  # a strongly state-dependent Jacobian, with complex eigenvalues
+    S = 0.5 * np.random.default_rng(6).normal(size=(40, 4))
+    radius, gradient, dzeta = _local_spectral_radius(A, E, ez, S)
+    jacobians = A + np.einsum("iz,tzj->tij", E, dzeta)
+    np.testing.assert_allclose(radius, np.abs(np.linalg.eigvals(jacobians)).max(axis=1))
+    h = 1e-7
+    for i, j in [(0, 0), (1, 2), (2, 1)]:
+        step = np.zeros_like(A)
+        step[i, j] = h
+        fd = (_local_spectral_radius(A + step, E, ez, S)[0]
+              - _local_spectral_radius(A - step, E, ez, S)[0]) / (2 * h)
+        np.testing.assert_allclose(gradient[:, i, j], fd, rtol=1e-6, atol=1e-7)
+    for i, k in [(0, 3), (2, 17)]:
+        step = np.zeros_like(E)
+        step[i, k] = h
+        fd = (_local_spectral_radius(A, E + step, ez, S)[0]
+              - _local_spectral_radius(A, E - step, ez, S)[0]) / (2 * h)
+        expected = np.einsum("tj,tj->t", gradient[:, i, :], dzeta[:, k, :])
+        np.testing.assert_allclose(expected, fd, rtol=1e-6, atol=1e-7)
+
+
+def test_weight_decay_rows_have_an_exact_jacobian():
+    matrices, ez, ee = _random_model(2, 1, 1, "full", "full", seed=7)
+    rng = np.random.default_rng(8)
+    U = 0.3 * rng.normal(size=(60, 1))
+    starts = np.array([0, 60])
+    Y = simulate_pnlss(*matrices, ez, ee, U, starts, np.zeros((1, 2)), DIVERGENCE_BOUND)[0]
+    rows = np.ones(60, dtype=bool)
+    problem = _PNLSSProblem(U, Y + 0.01 * rng.normal(size=Y.shape), starts, ez, ee, 2,
+                            False, rows, ~rows, None, weight_decay=0.5)
+    theta = _pack(matrices)
+    problem.set_coefficient_scale(theta)
+    assert np.all(problem.coefficient_scale > 0)
+    r, J = problem.residual(theta, True)
+    assert r.shape == (60 + len(problem.polynomial_columns),)
+    J_fd = np.empty_like(J)
+    for k in range(theta.size):
+        h = 1e-6 * max(1.0, abs(theta[k]))
+        up, down = theta.copy(), theta.copy()
+        up[k] += h
+        down[k] -= h
+        J_fd[:, k] = (problem.residual(up, False)[0] - problem.residual(down, False)[0]) / (2 * h)
+    np.testing.assert_allclose(J, J_fd, rtol=1e-6, atol=1e-6 * np.abs(J).max())
+
+
+def test_compiled_state_derivatives_match_the_monomial_jacobian():
+    exponents = monomial_exponents(3, 2, (2, 3), "full")
+    S = np.random.default_rng(9).normal(size=(20, 5))
+    np.testing.assert_allclose(monomial_state_derivatives(S, exponents, 3),
+                               monomial_jacobian(S, exponents)[:, :, :3], rtol=1e-13)
+
+
+def _max_local_radius(model, u):
+    _, states = model.simulate(u, return_states=True)
+    S = np.hstack([states, (u - model.u_offset_) / model.u_scale_])
+    return _local_spectral_radius(model.A_, model.E_, model.state_exponents_, S)[0].max()
+
+
+def test_stability_penalty_makes_the_model_locally_contracting():
+    # This system is locally expanding (0.6 + 0.4 x > 1) where x > 1, which
+    # these data reach: the penalty trades some accuracy for a contracting model.
+    rng = np.random.default_rng(0)
+    u = 0.3 * rng.normal(size=(400, 1))
+    y = _quadratic_system(u)
+    options = dict(n_states=1, degree=2, max_iter=40)
+    free = _fit_quiet(PNLSSRegressor(**options), u, y)
+    penalised = _fit_quiet(PNLSSRegressor(stability_penalty=1e4, **options), u, y)
+    assert _max_local_radius(free, u) > 1.2
+    assert _max_local_radius(penalised, u) < 1.01
+    assert penalised.score(u, y) > 0.95
+    assert penalised.loss_history_[-1] < penalised.loss_history_[0]
+
+
+def test_weight_decay_shrinks_the_polynomial_terms():
+    rng = np.random.default_rng(1)
+    u = 0.4 * rng.normal(size=(300, 1))
+    y = _quadratic_system(u) + 0.02 * rng.normal(size=300)
+    sizes = []
+    for weight_decay in (0.0, 0.1, 10.0):
+        model = _fit_quiet(PNLSSRegressor(1, degree=(2, 3), weight_decay=weight_decay,
+                                          max_iter=40), u, y)
+        sizes.append(np.abs(np.r_[model.E_.ravel(), model.F_.ravel()]).sum())
+    assert sizes[0] > sizes[1] > sizes[2]
 
 
 def test_divergence_is_reported():
