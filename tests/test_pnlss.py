@@ -444,24 +444,49 @@ def test_frequency_cost_needs_whole_periods():
 # Tables 2-3 report 0.47-0.76 V for 500-700 fitted samples). No variant tried
 # (raw-signal polynomials with a linear refinement, toolbox damping schedule,
 # constant terms, output offset from the BLA, ridge on E and F, n_transient,
-# reduced term structures) lowers the median validation error robustly; the
-# selected models and most nonlinear iterates diverge on the time-reversed
-# estimation input: selection on a 307-sample tail cannot tell apart models
-# that blow up at the test record's overflow.
+# reduced term structures, early stopping, 300 iterations) lowers the median
+# validation error robustly; the selected models and most nonlinear iterates
+# diverge on the time-reversed estimation input: selection on a 307-sample tail
+# cannot tell apart models that blow up at the test record's overflow.
+#
+# The stability penalty removes the divergence: over stability_penalty in
+# {0.1, 1, 10} x weight_decay in {0, 1e-3, 1e-2, 0.1} x held-out fractions
+# {0.25, 0.3, 0.35} no model diverged on the test input (4 of 12 without it).
+# The weights with the lowest median held-out error (1 and 0.01, as in the
+# main job) give 0.417 V at the 70/30 split: better than the paper's PNLSS-I
+# (0.450 V), not the 0.40 V target.
+
+
+@pytest.fixture(scope="module")
+def stabilised_pnlss_i(cascaded_tanks):
+    model = PNLSSRegressor(3, degree=(2, 3), estimate_x0=True, center=True, max_iter=300,
+                           stability_penalty=1.0, weight_decay=0.01,
+                           validation_fraction=0.3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model.fit(cascaded_tanks.X_est, cascaded_tanks.y_est)
+    return model
 
 
 @pytest.mark.slow
 @pytest.mark.realdata
-@pytest.mark.xfail(strict=True, reason="target 0.40 V not reached (0.5 V to divergent)")
-def test_cascaded_tanks_pnlss_i(cascaded_tanks):
-    data = cascaded_tanks
-    model = PNLSSRegressor(3, degree=(2, 3), estimate_x0=True, center=True,
-                           validation_fraction=0.3)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        model.fit(data.X_est, data.y_est)
+def test_cascaded_tanks_stabilised_pnlss_i_beats_the_paper(cascaded_tanks,
+                                                           stabilised_pnlss_i):
+    data, model = cascaded_tanks, stabilised_pnlss_i
     assert model.n_params_ == 9 + 3 + 3 + 1 + 3 * 30 + 30 + 3
-    assert rms_error(data.y_test, model.predict(data.X_test)) <= 0.40
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimulationDivergedWarning)
+        y_test = model.predict(data.X_test)
+    assert rms_error(data.y_test, y_test) <= 0.450
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+@pytest.mark.xfail(strict=True, reason="target 0.40 V not reached (0.417 V)")
+def test_cascaded_tanks_pnlss_i(cascaded_tanks, stabilised_pnlss_i):
+    data = cascaded_tanks
+    y_test = stabilised_pnlss_i.predict(data.X_test)
+    assert rms_error(data.y_test, y_test) <= 0.40
 
 
 @pytest.mark.slow
