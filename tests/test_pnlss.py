@@ -417,6 +417,9 @@ def test_periodic_prediction_is_steady_state(reference):
         ({"period": 7}, "whole number of periods"),
         ({"state_terms": np.array([[1, 0]])}, "shape"),
         ({"degree": (1, 2)}, ">= 2"),
+        ({"stability_penalty": -1.0}, "stability_penalty"),
+        ({"weight_decay": -0.1}, "weight_decay"),
+        ({"n_iter_no_change": 0}, "n_iter_no_change"),
     ],
 )
 def test_bad_parameters(params, match):
