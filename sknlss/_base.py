@@ -223,6 +223,13 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         (n_samples, n_states) and a flag telling whether a trajectory diverged.
         """
 
+    def _set_search_result(self, result):
+        """Store the history of the Levenberg-Marquardt search that was kept."""
+        self.n_iter_ = result.n_iter
+        self.loss_history_ = result.loss_history
+        self.validation_loss_history_ = result.validation_history
+        self.best_iteration_ = result.best_iter
+
     # ----------------------------------------------------------- simulation
     def _initial_states(self, x0, n_sequences):
         n_states = self.A_.shape[0]

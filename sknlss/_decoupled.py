@@ -420,20 +420,13 @@ class DecoupledPNLSS(_BaseStateSpace):
                                     label=f"DecoupledPNLSS start {i}", **options)
             for i, seed in enumerate(seeds)
         )
-        scores = [
-            result.validation_history[result.best_iter] if val_mask.any()
-            else result.loss_history[-1]
-            for _, _, result, _ in runs
-        ]
+        scores = [result.selection_loss for _, _, result, _ in runs]
         matrices, x0, result, self.decoupling_error_ = runs[int(np.argmin(scores))]
         (self.A_, self.B_, self.C_, self.D_, self.V_, self.W_,
          self.branch_coefficients_) = matrices
         self.x0_ = x0
         self.n_params_ = int(result.theta.size)
-        self.n_iter_ = result.n_iter
-        self.loss_history_ = result.loss_history
-        self.validation_loss_history_ = result.validation_history
-        self.best_iteration_ = result.best_iter
+        self._set_search_result(result)
         return self
 
     def _simulate_normalized(self, U, starts, x0):

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from ._base import DIVERGENCE_BOUND
-from ._kernels import matvec, out_of_bounds, state_space_step
+from ._kernels import matmat, matvec, out_of_bounds, state_space_step
 
 
 def parameter_sizes(n_states, n_inputs, n_outputs, rank, n_coefficients):
@@ -196,13 +196,8 @@ def jacobian_decoupled(A, B, C, D, V, W, coefficients, U, starts, x0):
                     for l in range(rank):
                         acc += W[i, l] * dg[l] * V[j, l]
                     M[i, j] = acc
-            # Propagated part: M @ sens.
-            for i in range(n_all):
-                for p in range(n_params):
-                    acc = 0.0
-                    for j in range(n):
-                        acc += M[i, j] * sens[j, p]
-                    out[i, p] = acc
+            # Propagated part.
+            matmat(M, sens, out)
             # Direct dependence of [x(t+1); y(t)] on each parameter.
             for i in range(n):
                 for j in range(n):

@@ -23,6 +23,17 @@ def matvec(M, v, out):
 
 
 @njit(cache=True)
+def matmat(M, N, out):
+    """``out = M N`` without allocating."""
+    for i in range(M.shape[0]):
+        for p in range(N.shape[1]):
+            acc = 0.0
+            for j in range(N.shape[0]):
+                acc += M[i, j] * N[j, p]
+            out[i, p] = acc
+
+
+@njit(cache=True)
 def state_space_step(A, B, C, D, x, u, state_term, output_term, x_next, y):
     """One step of a state-space model with its nonlinear terms already evaluated.
 

@@ -25,7 +25,7 @@ from scipy.linalg import solve_discrete_lyapunov
 from sklearn.exceptions import ConvergenceWarning
 
 from ._base import DIVERGENCE_BOUND
-from ._kernels import out_of_bounds
+from ._kernels import out_of_bounds, state_space_step
 from ._optimize import LMResult, levenberg_marquardt
 
 # Spectral radius allowed for any fitted BLA whatever the data: the model must
@@ -350,16 +350,21 @@ def _simulate_kernel(A, B, C, D, U, starts, x0, bound):
     n_y = C.shape[0]
     Y = np.full((n_samples, n_y), np.nan)
     X = np.full((n_samples, n), np.nan)
+    no_state_term = np.zeros(n)
+    no_output_term = np.zeros(n_y)
+    x = np.empty(n)
+    x_next = np.empty(n)
     diverged = False
     for k in range(starts.shape[0] - 1):
-        x = x0[k].copy()
+        x[:] = x0[k]
         for t in range(starts[k], starts[k + 1]):
             if out_of_bounds(x, bound):
                 diverged = True
                 break
             X[t] = x
-            Y[t] = C @ x + D @ U[t]
-            x = A @ x + B @ U[t]
+            state_space_step(A, B, C, D, x, U[t], no_state_term, no_output_term, x_next,
+                             Y[t])
+            x[:] = x_next
     return Y, X, diverged
 
 

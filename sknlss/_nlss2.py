@@ -456,6 +456,8 @@ class NLSS2Regressor(_BaseStateSpace):
         Mean squared training residual per iteration of the kept start.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
         Validation loss per iteration, when ``validation_fraction > 0``.
+    best_iteration_ : int
+        Iteration of the kept start whose parameters were kept.
     linear_estimator_ : estimator
         The fitted linear estimator of the initialisation.
     n_features_in_ : int
@@ -601,17 +603,10 @@ class NLSS2Regressor(_BaseStateSpace):
                                     self.alpha_, seed, label=f"NLSS2 start {i}", **options)
             for i, seed in enumerate(seeds)
         )
-        has_validation = validation_mask.any()
-        scores = [
-            result.validation_history[result.best_iter] if has_validation
-            else result.loss_history[-1]
-            for _, result in runs
-        ]
+        scores = [result.selection_loss for _, result in runs]
         model, result = runs[int(np.argmin(scores))]
         self._set_model(model, Y.shape[1])
-        self.n_iter_ = result.n_iter
-        self.loss_history_ = result.loss_history
-        self.validation_loss_history_ = result.validation_history
+        self._set_search_result(result)
         self.n_params_ = (
             sum(model[k].size for k in ("A", "B", "C", "D", "W", "b", "v", "c"))
             + (self.n_states if self.estimate_x0 else 0)

@@ -207,29 +207,25 @@ class _PNLSSProblem:
             return np.zeros((self.n_sequences, self.n_states))
         return np.ascontiguousarray(np.broadcast_to(x0, (self.n_sequences, x0.size)))
 
-    def states(self, theta):
-        """Simulated ``[x; u]`` at the cost rows, or None when the simulation diverged."""
-        matrices, x0 = self.unpack(theta)
-        _, X, diverged = simulate_pnlss(*matrices, *self.exponents, self.U, self.starts,
-                                        self._initial_states(x0), DIVERGENCE_BOUND)
-        if diverged:
-            return None
+    def _fitted_points(self, X):
+        """``[x; u]`` at the cost rows, from the simulated states X."""
         return np.hstack([X, self.U])[self.fit_rows]
 
     def set_coefficient_scale(self, theta):
         """Scale the weight decay of each coefficient of E and F by the RMS of its
         monomial along the trajectory of ``theta`` (the initial model), so that
         the decay acts on the size of each term's contribution."""
-        S = self.states(theta)
+        S = self._fitted_points(self.simulate(theta, False)[1])
         rms = [np.sqrt(np.mean(evaluate_monomials(S, exponents) ** 2, axis=0))
                for exponents in self.exponents]
         self.coefficient_scale = np.concatenate(
             [np.tile(rms[0], self.shapes[4][0]), np.tile(rms[1], self.shapes[5][0])]
         )
 
-    def _penalty_rows(self, theta, n_residuals, jacobian):
+    def _penalty_rows(self, theta, X, n_residuals, jacobian):
         """Residual rows (and their Jacobian) of the stability penalty and the
-        weight decay, both relative to the mean squared residual.
+        weight decay, both relative to the mean squared residual, for the
+        parameters ``theta`` whose simulated states are ``X``.
 
         The stability rows are the excess over 1 of the local spectral radius
         of the state map along the fitted trajectory. Their Jacobian holds the
@@ -240,9 +236,7 @@ class _PNLSSProblem:
         rows, jacobians = [], []
         if self.stability_penalty:
             (A, _, _, _, E, _), _ = self.unpack(theta)
-            S = self.states(theta)
-            if S is None:
-                return None, None
+            S = self._fitted_points(X)
             radius, gradient, dzeta = _local_spectral_radius(A, E, self.exponents[0], S)
             excess = np.maximum(radius - 1.0, 0.0)
             weight = np.sqrt(self.stability_penalty * n_residuals / len(S))
@@ -266,17 +260,19 @@ class _PNLSSProblem:
         return np.concatenate(rows), (np.vstack(jacobians) if jacobian else None)
 
     def simulate(self, theta, jacobian):
+        """Simulated outputs, states, output Jacobian (None unless ``jacobian``)
+        and the divergence flag."""
         matrices, x0 = self.unpack(theta)
         x0 = self._initial_states(x0)
         if jacobian:
             return jacobian_pnlss(*matrices, *self.exponents, self.U, self.starts, x0,
                                   self.estimate_x0, DIVERGENCE_BOUND, self.jacobian_rows)
-        Y_model, _, diverged = simulate_pnlss(*matrices, *self.exponents, self.U,
+        Y_model, X, diverged = simulate_pnlss(*matrices, *self.exponents, self.U,
                                               self.starts, x0, DIVERGENCE_BOUND)
-        return Y_model, None, diverged
+        return Y_model, X, None, diverged
 
     def residual(self, theta, jacobian):
-        Y_model, J, diverged = self.simulate(theta, jacobian)
+        Y_model, X, J, diverged = self.simulate(theta, jacobian)
         if diverged:
             return None, None
         Y_fit = Y_model[self.fit_rows]
@@ -290,9 +286,7 @@ class _PNLSSProblem:
         if jacobian:
             J = J.reshape(r.size, -1)
         if self.stability_penalty or self.weight_decay:
-            r_penalty, J_penalty = self._penalty_rows(theta, r.size, jacobian)
-            if r_penalty is None:
-                return None, None
+            r_penalty, J_penalty = self._penalty_rows(theta, X, r.size, jacobian)
             r = np.concatenate([r, r_penalty])
             if jacobian:
                 J = np.vstack([J, J_penalty])
@@ -311,7 +305,7 @@ class _PNLSSProblem:
         return residual
 
     def _validation_loss(self, theta):
-        Y_model, _, diverged = self.simulate(theta, False)
+        Y_model, _, _, diverged = self.simulate(theta, False)
         if diverged:
             return np.inf
         return float(np.mean((Y_model[self.val_rows] - self.Y[self.val_rows]) ** 2))
@@ -635,10 +629,7 @@ class PNLSSRegressor(_BaseStateSpace):
         )
         self.x0_ = np.zeros(n) if x0 is None else x0.copy()
         self.n_params_ = int(result.theta.size)
-        self.n_iter_ = result.n_iter
-        self.loss_history_ = result.loss_history
-        self.validation_loss_history_ = result.validation_history
-        self.best_iteration_ = result.best_iter
+        self._set_search_result(result)
 
     # ----------------------------------------------------------- simulation
     def _simulate_normalized(self, U, starts, x0):

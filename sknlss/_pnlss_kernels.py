@@ -27,7 +27,7 @@ recursion carries those columns only; C, D and F enter the output directly.
 import numpy as np
 from numba import njit
 
-from ._kernels import matvec, out_of_bounds, state_space_step
+from ._kernels import matmat, matvec, out_of_bounds, state_space_step
 
 
 @njit(cache=True)
@@ -166,7 +166,7 @@ def simulate_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
 @njit(cache=True)
 def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, starts,
                    x0, estimate_x0, bound, jacobian_rows):
-    """Simulated outputs and their Jacobian with respect to theta.
+    """Simulated outputs and states, and the outputs' Jacobian with respect to theta.
 
     Parameters are those of :func:`simulate_pnlss`, plus
 
@@ -181,10 +181,11 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
     Returns
     -------
     Y : ndarray of shape (n_samples, n_y)
+    X : ndarray of shape (n_samples, n)
     J : ndarray of shape (max(jacobian_rows) + 1, n_y, n_params)
         dY/dtheta, laid out as described in the module docstring.
     diverged : bool
-        When True, ``Y`` and ``J`` are incomplete and must not be used.
+        When True, ``Y``, ``X`` and ``J`` are incomplete and must not be used.
     """
     n = A.shape[0]
     n_u = B.shape[1]
@@ -213,6 +214,7 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
         global_col[l_x0 + k] = o_x0 + k
 
     Y = np.empty((n_samples, n_y))
+    X = np.empty((n_samples, n))
     n_rows = 0
     for t in range(n_samples):
         n_rows = max(n_rows, jacobian_rows[t] + 1)
@@ -238,7 +240,7 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
             sens[i, l_x0 + i] = 1.0
         for t in range(starts[seq], starts[seq + 1]):
             if out_of_bounds(x, bound):
-                return Y, J, True
+                return Y, X, J, True
             s[:n] = x
             s[n:] = U[t]
             _fill_powers(s, powers.shape[1] - 1, powers)
@@ -246,18 +248,11 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
             _eval_monomials(powers, output_exponents, eta)
             _state_derivatives(powers, state_exponents, n, dzeta)
             _state_derivatives(powers, output_exponents, n, deta)
-            for i in range(n):
-                for j in range(n):
-                    acc = A[i, j]
-                    for k in range(n_zeta):
-                        acc += E[i, k] * dzeta[k, j]
-                    jac_x[i, j] = acc
-            for i in range(n_y):
-                for j in range(n):
-                    acc = C[i, j]
-                    for k in range(n_eta):
-                        acc += F[i, k] * deta[k, j]
-                    jac_y[i, j] = acc
+            X[t] = x
+            matmat(E, dzeta, jac_x)
+            jac_x += A
+            matmat(F, deta, jac_y)
+            jac_y += C
             matvec(E, zeta, state_term)
             matvec(F, eta, output_term)
             state_space_step(A, B, C, D, x, U[t], state_term, output_term, x_next, Y[t])
@@ -277,12 +272,8 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
                     for j in range(n_eta):
                         J[row, i, o_f + i * n_eta + j] = eta[j]
             # State sensitivity.
+            matmat(jac_x, sens, sens_next)
             for i in range(n):
-                for col in range(n_state_params):
-                    acc = 0.0
-                    for j in range(n):
-                        acc += jac_x[i, j] * sens[j, col]
-                    sens_next[i, col] = acc
                 for j in range(n):
                     sens_next[i, i * n + j] += x[j]
                 for j in range(n_u):
@@ -291,4 +282,4 @@ def jacobian_pnlss(A, B, C, D, E, F, state_exponents, output_exponents, U, start
                     sens_next[i, l_e + i * n_zeta + j] += zeta[j]
             x[:] = x_next
             sens[:] = sens_next
-    return Y, J, False
+    return Y, X, J, False

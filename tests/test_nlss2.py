@@ -2,6 +2,7 @@ import warnings
 
 import numpy as np
 import pytest
+from _numeric import central_differences
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
@@ -49,16 +50,10 @@ def test_jacobian_matches_finite_differences(n_inputs, n_outputs, estimate_x0, a
     assert not diverged
     np.testing.assert_allclose(
         Y, _run(theta, shapes, estimate_x0, U, starts, n_neurons, activation, False)[0])
-    finite_differences = np.empty_like(dY)
-    for i in range(theta.size):
-        step = 1e-6 * max(1.0, abs(theta[i]))
-        plus, minus = theta.copy(), theta.copy()
-        plus[i] += step
-        minus[i] -= step
-        finite_differences[:, :, i] = (
-            _run(plus, shapes, estimate_x0, U, starts, n_neurons, activation, False)[0]
-            - _run(minus, shapes, estimate_x0, U, starts, n_neurons, activation, False)[0]
-        ) / (2 * step)
+    finite_differences = central_differences(
+        lambda th: _run(th, shapes, estimate_x0, U, starts, n_neurons, activation, False)[0],
+        theta,
+    )
     assert np.abs(finite_differences - dY).max() <= 1e-6 * np.abs(dY).max()
 
 
