@@ -9,7 +9,7 @@ import pytest
 docscrape = pytest.importorskip("numpydoc.docscrape")
 
 PUBLIC_MODULES = ["sknlss", "sknlss.metrics", "sknlss.signals", "sknlss.datasets",
-                  "sknlss.plotting"]
+                  "sknlss.plotting", "sknlss.model_selection"]
 # The main job's Python interface, documented in the API reference.
 COMMAND_LINE = {"sknlss.__main__": ["reproduce", "main"]}
 

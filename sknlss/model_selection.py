@@ -1,0 +1,241 @@
+"""Selection among fits that hold out different ends of the records.
+
+On a short record the iterate (and the start) that a single held-out end
+selects depends strongly on where that end begins: a few dozen samples more or
+less can move an overflow episode or a large excursion between the fitted and
+the held-out part. :class:`HoldoutSearch` fits one model per held-out share
+(and per parameter setting) and keeps the one with the smallest simulation
+error on the end of the records that all of them held out.
+"""
+
+import warnings
+from numbers import Integral
+
+import numpy as np
+from sklearn.base import BaseEstimator, MetaEstimatorMixin, RegressorMixin, clone
+from sklearn.model_selection import ParameterGrid
+from sklearn.utils._param_validation import HasMethods
+from sklearn.utils.parallel import Parallel, delayed
+from sklearn.utils.validation import check_is_fitted
+
+from ._base import SimulationDivergedWarning, holdout_masks, sequence_bounds
+
+__all__ = ["HoldoutSearch"]
+
+
+def _fit_candidate(estimator, params, X, y, sequence_id):
+    return clone(estimator).set_params(**params).fit(X, y, sequence_id=sequence_id)
+
+
+def _holdout_errors(model, X, Y, sequence_id, rows):
+    """Coefficient of determination and RMS error of the free-run simulation on
+    ``rows`` (uniform average over the outputs); ``-inf`` and ``inf`` when the
+    simulation diverges."""
+    with warnings.catch_warnings():
+        # A candidate that diverges is ranked last; that is its whole outcome.
+        warnings.simplefilter("ignore", SimulationDivergedWarning)
+        simulated = np.asarray(model.predict(X, sequence_id=sequence_id)).reshape(Y.shape)
+    if not np.all(np.isfinite(simulated[rows])):
+        return -np.inf, np.inf
+    error = simulated[rows] - Y[rows]
+    mse = np.mean(error**2, axis=0)
+    variance = np.var(Y[rows], axis=0)
+    r2 = 1.0 - mse / np.where(variance > 0, variance, 1.0)
+    return float(np.mean(r2)), float(np.sqrt(np.mean(mse)))
+
+
+class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
+    """Best of several fits with different held-out ends, judged on their common end.
+
+    Each candidate is a clone of ``estimator`` fitted with one of the
+    ``validation_fractions`` (and one setting of ``param_grid``): it fits the
+    first part of every sequence and selects its iterate (and start) on the
+    rest. All candidates are then simulated over the whole records and ranked
+    by the coefficient of determination on the last ``min(validation_fractions)``
+    of every sequence, which none of them was fitted on. The best one is kept
+    and used by ``predict``.
+
+    On short records this is steadier than a single split: the model a single
+    held-out end selects can change a lot when the boundary moves by a few
+    samples (see ``benchmarks/bench_cascaded_tanks_splits.py``).
+
+    Parameters
+    ----------
+    estimator : estimator
+        A sknlss estimator with a ``validation_fraction`` parameter.
+    validation_fractions : array-like of float, default=(0.25, 0.275, 0.3, 0.325, 0.35)
+        Held-out shares of the end of every sequence, one candidate fit each.
+    param_grid : dict or list of dict, default=None
+        Further settings to combine with every fraction, as in
+        :class:`~sklearn.model_selection.GridSearchCV`; ``None`` varies the
+        fraction only.
+    n_jobs : int, default=None
+        Number of candidates fitted in parallel (joblib).
+
+    Attributes
+    ----------
+    best_estimator_ : estimator
+        The selected fitted candidate.
+    best_params_ : dict
+        Its settings, ``validation_fraction`` included.
+    best_score_ : float
+        Its coefficient of determination on the common held-out end.
+    results_ : dict of lists
+        Per candidate: ``params``, ``holdout_score`` (coefficient of
+        determination, ``-inf`` for a diverging simulation) and
+        ``holdout_rms`` (RMS error in output units, averaged over the outputs
+        as mean squares).
+    holdout_fraction_ : float
+        Share of the end of every sequence on which the candidates are ranked.
+    n_features_in_ : int
+        Number of inputs.
+
+    See Also
+    --------
+    sklearn.model_selection.GridSearchCV : Cross-validated search, for
+        settings that a split of independent records can judge.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sknlss import PNLSSRegressor
+    >>> from sknlss.model_selection import HoldoutSearch
+    >>> rng = np.random.default_rng(0)
+    >>> u = 0.3 * rng.normal(size=(400, 1))
+    >>> y = np.zeros(400)
+    >>> x = 0.0
+    >>> for t in range(400):
+    ...     y[t] = x
+    ...     x = 0.5 * x + u[t, 0] + 0.1 * x**2
+    >>> search = HoldoutSearch(PNLSSRegressor(n_states=1, degree=2, max_iter=10),
+    ...                        validation_fractions=[0.2, 0.25]).fit(u, y)
+    >>> sorted(search.best_params_)
+    ['validation_fraction']
+    >>> bool(search.score(u, y) > 0.99)
+    True
+    """
+
+    _parameter_constraints: dict = {
+        "estimator": [HasMethods(["fit", "predict", "get_params"])],
+        "validation_fractions": ["array-like"],
+        "param_grid": [dict, list, None],
+        "n_jobs": [Integral, None],
+    }
+
+    def __init__(self, estimator, *, validation_fractions=(0.25, 0.275, 0.3, 0.325, 0.35),
+                 param_grid=None, n_jobs=None):
+        self.estimator = estimator
+        self.validation_fractions = validation_fractions
+        self.param_grid = param_grid
+        self.n_jobs = n_jobs
+
+    def _candidates(self):
+        fractions = np.asarray(self.validation_fractions, dtype=np.float64).ravel()
+        if fractions.size == 0 or np.any((fractions <= 0) | (fractions >= 1)):
+            raise ValueError(
+                "validation_fractions must hold at least one share strictly between "
+                f"0 and 1; got {self.validation_fractions!r}."
+            )
+        if "validation_fraction" not in self.estimator.get_params():
+            raise ValueError(
+                f"{type(self.estimator).__name__} has no validation_fraction "
+                "parameter: it cannot hold out the end of the records."
+            )
+        grid = ParameterGrid({} if self.param_grid is None else self.param_grid)
+        for params in grid:
+            if "validation_fraction" in params:
+                raise ValueError(
+                    "param_grid must not set validation_fraction; use "
+                    "validation_fractions."
+                )
+        return [{**params, "validation_fraction": float(fraction)}
+                for params in grid for fraction in fractions], float(fractions.min())
+
+    def fit(self, X, y, *, sequence_id=None):
+        """Fit every candidate and keep the best on the common held-out end.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+            Measured output signal.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels (see the estimator's ``fit``).
+
+        Returns
+        -------
+        self : object
+            The fitted search.
+        """
+        self._validate_params()
+        candidates, self.holdout_fraction_ = self._candidates()
+        models = Parallel(n_jobs=self.n_jobs)(
+            delayed(_fit_candidate)(self.estimator, params, X, y, sequence_id)
+            for params in candidates
+        )
+        # The candidates validated the data; the ranking only needs them as arrays.
+        X_checked = np.asarray(X, dtype=np.float64)
+        Y = np.asarray(y, dtype=np.float64).reshape(len(X_checked), -1)
+        starts = sequence_bounds(sequence_id, len(X_checked))
+        n_transient = self.estimator.get_params().get("n_transient", 0)
+        rows = holdout_masks(starts, n_transient, self.holdout_fraction_)[1]
+        errors = [_holdout_errors(model, X_checked, Y, sequence_id, rows)
+                  for model in models]
+        scores = [score for score, _ in errors]
+        best = int(np.argmax(scores))
+        self.results_ = {
+            "params": candidates,
+            "holdout_score": scores,
+            "holdout_rms": [rms for _, rms in errors],
+        }
+        self.best_estimator_ = models[best]
+        self.best_params_ = candidates[best]
+        self.best_score_ = scores[best]
+        self.n_features_in_ = self.best_estimator_.n_features_in_
+        return self
+
+    def predict(self, X, *, sequence_id=None, x0=None):
+        """Free-run simulation of the selected model (see its ``predict``).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels.
+        x0 : array-like, default=None
+            Initial state; ``None`` uses the selected model's fitted ``x0_``.
+
+        Returns
+        -------
+        y : ndarray of shape (n_samples,) or (n_samples, n_outputs)
+            Simulated output.
+        """
+        check_is_fitted(self)
+        return self.best_estimator_.predict(X, sequence_id=sequence_id, x0=x0)
+
+    def score(self, X, y, *, sequence_id=None):
+        """R² of the selected model's simulated output (see its ``score``).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+            Measured output.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels.
+
+        Returns
+        -------
+        score : float
+        """
+        check_is_fitted(self)
+        return self.best_estimator_.score(X, y, sequence_id=sequence_id)
+
+    @property
+    def n_params_(self):
+        """Number of free parameters of the selected model."""
+        check_is_fitted(self)
+        return self.best_estimator_.n_params_
