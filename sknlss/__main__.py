@@ -184,13 +184,13 @@ def _print_selection(fitted, out):
                 if isinstance(model, HoldoutSearch)}
     if not searches:
         return
-    print("\nKept by the held-out end of the estimation record (last "
-          f"{min(_HOLDOUT_FRACTIONS):.0%}, never fitted):", file=out)
+    print("\nKept by the held-out end of the estimation record (never fitted):",
+          file=out)
     for name, search in searches.items():
         settings = ", ".join(f"{key}={value}" for key, value in search.best_params_.items())
-        rms = search.results_["holdout_rms"][search.results_["params"].index(
-            search.best_params_)]
-        print(f"  {name}: {settings} (held-out RMS {rms:.4f})", file=out)
+        rms = search.results_["holdout_rms"][search.best_index_]
+        print(f"  {name}: {settings} (RMS {rms:.4f} on the last "
+              f"{search.holdout_fraction_:.0%})", file=out)
 
 
 def _format_cell(value, fmt):

@@ -80,6 +80,8 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         Its settings, ``validation_fraction`` included.
     best_score_ : float
         Its coefficient of determination on the common held-out end.
+    best_index_ : int
+        Its position in the lists of ``results_``.
     results_ : dict of lists
         Per candidate: ``params``, ``holdout_score`` (coefficient of
         determination, ``-inf`` for a diverging simulation) and
@@ -183,7 +185,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         errors = [_holdout_errors(model, X_checked, Y, sequence_id, rows)
                   for model in models]
         scores = [score for score, _ in errors]
-        best = int(np.argmax(scores))
+        self.best_index_ = best = int(np.argmax(scores))
         self.results_ = {
             "params": candidates,
             "holdout_score": scores,

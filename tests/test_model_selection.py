@@ -50,7 +50,7 @@ def test_keeps_the_candidate_with_the_smallest_error_on_the_common_end():
         candidate = PNLSSRegressor(n_states=1, degree=2).set_params(**setting).fit(u, y)
         assert rms == pytest.approx(_common_end_rms(candidate, u, y, 0.2), rel=1e-10)
     best = int(np.argmax(search.results_["holdout_score"]))
-    assert search.best_params_ == params[best]
+    assert search.best_index_ == best and search.best_params_ == params[best]
     assert search.results_["holdout_rms"][best] == min(search.results_["holdout_rms"])
     # The nonlinear fits beat the linear starts (max_iter=0) on this system.
     assert search.best_params_["max_iter"] == 3
