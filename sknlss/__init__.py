@@ -11,6 +11,12 @@ NLSS2Regressor
     estimated states.
 DecoupledPNLSS
     PNLSS whose multivariate polynomials are decoupled into univariate branches.
+NLLFRRegressor
+    Linear state space with a static nonlinearity in feedback (NL-LFR).
+
+Bases of the static nonlinearities
+----------------------------------
+PolynomialBasis, LegendreBasis, ChebyshevBasis
 
 Functions
 ---------
@@ -19,20 +25,26 @@ decouple_polynomial
     through the CPD of its Jacobian tensor.
 """
 
-from ._base import SimulationDivergedWarning
-from ._bla import BLAEstimator
-from ._decouple import decouple_polynomial
-from ._decoupled import DecoupledPNLSS
-from ._nlss2 import NLSS2Regressor
-from ._pnlss import PNLSSRegressor
+from ._estimators._bla import BLAEstimator
+from ._estimators._decoupled import DecoupledPNLSS
+from ._estimators._nllfr import NLLFRRegressor
+from ._estimators._nlss2 import NLSS2Regressor
+from ._estimators._pnlss import PNLSSRegressor
+from ._terms._bases import ChebyshevBasis, LegendreBasis, PolynomialBasis
+from ._terms._cpd import decouple_polynomial
+from .exceptions import SimulationDivergedWarning
 
 __version__ = "0.1.0"
 
 __all__ = [
     "BLAEstimator",
+    "ChebyshevBasis",
     "DecoupledPNLSS",
+    "LegendreBasis",
+    "NLLFRRegressor",
     "NLSS2Regressor",
     "PNLSSRegressor",
+    "PolynomialBasis",
     "SimulationDivergedWarning",
     "decouple_polynomial",
 ]

@@ -11,7 +11,7 @@ import numpy as np
 from sklearn.utils.metadata_routing import MetadataRequest, _MetadataRequester
 from sklearn.utils.metadata_routing import _routing_enabled
 
-from ._base import sequence_bounds, transient_mask
+from ._core._sequences import sequence_bounds, transient_mask
 
 __all__ = ["rms_error", "nrmse", "fit_percent", "make_transient_scorer"]
 

@@ -18,7 +18,8 @@ from sklearn.utils._param_validation import HasMethods
 from sklearn.utils.parallel import Parallel, delayed
 from sklearn.utils.validation import check_is_fitted
 
-from ._base import SimulationDivergedWarning, holdout_masks, sequence_bounds
+from ._core._sequences import holdout_masks, sequence_bounds
+from .exceptions import SimulationDivergedWarning
 
 __all__ = ["HoldoutSearch"]
 

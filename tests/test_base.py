@@ -4,14 +4,10 @@ import numpy as np
 import pytest
 from sklearn.metrics import r2_score
 
-from sknlss._base import (
-    DIVERGENCE_BOUND,
-    SimulationDivergedWarning,
-    _BaseStateSpace,
-    holdout_masks,
-    sequence_bounds,
-    transient_mask,
-)
+from sknlss import SimulationDivergedWarning
+from sknlss._core._model import StateSpaceModel
+from sknlss._core._sequences import holdout_masks, sequence_bounds, transient_mask
+from sknlss._estimators._base import _BaseStateSpace
 
 
 # ------------------------------------------------------------ row helpers
@@ -83,20 +79,9 @@ class _FirstOrder(_BaseStateSpace):
         self.n_params_ = 0
         self.fit_starts_ = starts
 
-    def _simulate_normalized(self, U, starts, x0):
-        Y = np.full((U.shape[0], self.C_.shape[0]), np.nan)
-        states = np.full((U.shape[0], 1), np.nan)
-        diverged = False
-        for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
-            x = x0[k].copy()
-            for t in range(begin, end):
-                if not np.all(np.abs(x) <= DIVERGENCE_BOUND):
-                    diverged = True
-                    break
-                states[t] = x
-                Y[t] = self.C_ @ x + self.D_ @ U[t]
-                x = self.A_ @ x + self.B_ @ U[t]
-        return Y, states, diverged
+    def _fitted_model(self):
+        model = StateSpaceModel(1, self.B_.shape[1], self.C_.shape[0])
+        return model, model.pack({"A": self.A_, "B": self.B_, "C": self.C_, "D": self.D_})
 
 
 def _reference(model, U, x0=0.0):

@@ -10,7 +10,8 @@ from sklearn.base import clone
 from sklearn.datasets import load_iris
 
 from sknlss import BLAEstimator
-from sknlss._linear import pole_radius_limit
+from sknlss._estimators._bla import fit_linear_model
+from sknlss._linear._realization import pole_radius_limit
 from sknlss.datasets import make_cascaded_tanks, make_pnlss_reference
 from sknlss.metrics import rms_error
 from sknlss.signals import multisine
@@ -170,19 +171,19 @@ def test_mimo_periodic():
     assert bla.n_params_ == 9 + 6 + 6 + 4
 
 
-def test_fit_normalized_standalone_on_a_clone():
-    """The nonlinear estimators initialise from _fit_normalized on a clone."""
+def test_fit_linear_model_on_normalised_signals():
+    """The nonlinear estimators initialise from this function."""
     X, y, sid, _ = _periodic_records(period=128, n_realizations=2)
-    bla = clone(BLAEstimator(period=128)).set_params(n_states=4)
+    params = BLAEstimator(period=128, n_states=4).get_params()
     starts = np.array([0, 384, 768])
     U = np.ascontiguousarray((X - X.mean()) / X.std())
     Y = np.ascontiguousarray(((y - y.mean()) / y.std())[:, None])
-    bla._fit_normalized(U, Y, starts)
-    for name in ("A_", "B_", "C_", "D_", "x0_"):
-        assert np.all(np.isfinite(getattr(bla, name)))
-    assert bla.A_.shape == (4, 4) and bla.x0_.shape == (4,)
-    Yn, states, diverged = bla._simulate_normalized(U, starts, np.zeros((2, 4)))
-    assert Yn.shape == (768, 1) and states.shape == (768, 4) and not diverged
+    fit = fit_linear_model(U, Y, starts, params)
+    for M in (fit.A, fit.B, fit.C, fit.D, fit.x0):
+        assert np.all(np.isfinite(M))
+    assert fit.A.shape == (4, 4) and fit.x0.shape == (4,)
+    bla = BLAEstimator(period=128, n_states=4).fit(X, y, sequence_id=sid)
+    np.testing.assert_allclose(fit.A, bla.A_)
 
 
 def test_frf_in_user_units():

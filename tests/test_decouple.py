@@ -5,8 +5,8 @@ from math import factorial
 import numpy as np
 import pytest
 
-from sknlss._decouple import branch_values, decouple_polynomial
-from sknlss._polynomial import evaluate_monomials, monomial_exponents
+from sknlss._terms._cpd import branch_values, decouple_polynomial
+from sknlss._terms._polynomial import evaluate_monomials, monomial_exponents
 
 
 def _expand(V, W, coefficients, exponents):

@@ -1,71 +1,28 @@
-"""Decoupled PNLSS: compiled kernels and the estimator."""
+"""Decoupled PNLSS: the branch terms and the estimator."""
 
 import numpy as np
 import pytest
-from _numeric import central_differences
 from sklearn.base import clone
 
-from sknlss import DecoupledPNLSS, PNLSSRegressor
-from sknlss._decoupled import _initial_parameters, _stack_polynomials
-from sknlss._decoupled_kernels import (
-    jacobian_decoupled,
-    parameter_sizes,
-    simulate_decoupled,
-)
-from sknlss._polynomial import evaluate_monomials
+from sknlss import DecoupledPNLSS, PNLSSRegressor, PolynomialBasis
+from sknlss._core._model import StateSpaceModel
+from sknlss._estimators._decoupled import _stack_polynomials
+from sknlss._terms._branches import BranchTerms
+from sknlss._terms._polynomial import evaluate_monomials
 from sknlss.metrics import rms_error
 
 # Several fits below use few iterations on purpose.
 pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 
 
-def _random_model(seed, n=3, n_u=2, n_y=2, rank=4, n_coef=3):
-    rng = np.random.default_rng(seed)
-    A = 0.6 * np.linalg.qr(rng.standard_normal((n, n)))[0]
-    return (
-        A,
-        rng.standard_normal((n, n_u)),
-        rng.standard_normal((n_y, n)),
-        rng.standard_normal((n_y, n_u)),
-        0.5 * rng.standard_normal((n + n_u, rank)),
-        0.1 * rng.standard_normal((n + n_y, rank)),
-        0.3 * rng.standard_normal((rank, n_coef)),
-    )
-
-
-def _blocks(theta, n, n_u, n_y, rank, n_coef):
-    sizes = parameter_sizes(n, n_u, n_y, rank, n_coef)
-    shapes = [(n, n), (n, n_u), (n_y, n), (n_y, n_u), (n + n_u, rank), (n + n_y, rank),
-              (rank, n_coef), (n,)]
-    parts = np.split(theta, np.cumsum(sizes[:-1]))
-    return [p.reshape(s) for p, s in zip(parts, shapes)]
-
-
-def test_jacobian_matches_central_differences():
-    n, n_u, n_y, rank, n_coef = 3, 2, 2, 4, 3
-    matrices = _random_model(0, n, n_u, n_y, rank, n_coef)
-    rng = np.random.default_rng(1)
-    U = 0.5 * rng.standard_normal((70, n_u))
-    starts = np.array([0, 30, 70])
-    x0 = 0.2 * rng.standard_normal(n)
-    theta = np.concatenate([m.ravel() for m in (*matrices, x0)])
-
-    def simulate(theta):
-        *ms, x0 = _blocks(theta, n, n_u, n_y, rank, n_coef)
-        return simulate_decoupled(*ms, U, starts, np.tile(x0, (2, 1)))[0]
-
-    Y, dY, diverged = jacobian_decoupled(*matrices, U, starts, np.tile(x0, (2, 1)))
-    assert not diverged
-    assert dY.shape == (70, n_y, theta.size)
-    np.testing.assert_array_equal(Y, simulate(theta))
-    numeric = central_differences(simulate, theta)
-    error = np.abs(numeric - dY).max() / np.abs(dY).max()
-    assert error < 1e-6
-
-
-def test_simulation_follows_the_equations():
-    A, B, C, D, V, W, c = _random_model(2, 2, 1, 1, 2, 2)
-    U = np.random.default_rng(0).standard_normal((5, 1))
+def test_branch_terms_follow_the_equations():
+    rng = np.random.default_rng(2)
+    model = StateSpaceModel(2, 1, 1, BranchTerms(2, 1, 1, 2, PolynomialBasis(3)))
+    values = {name: 0.3 * rng.standard_normal(shape) for name, shape in model.blocks}
+    values["A"] = 0.5 * np.eye(2)
+    A, B, C, D, V, W, c = (values[k] for k in ("A", "B", "C", "D", "V", "W",
+                                               "coefficients"))
+    U = rng.standard_normal((5, 1))
     x = np.array([0.1, -0.2])
     expected = []
     for u in U:
@@ -73,25 +30,11 @@ def test_simulation_follows_the_equations():
         g = c[:, 0] * z**2 + c[:, 1] * z**3
         expected.append(C @ x + D @ u + W[2:] @ g)
         x = A @ x + B @ u + W[:2] @ g
-    Y, X, diverged = simulate_decoupled(A, B, C, D, V, W, c, U, np.array([0, 5]),
-                                        np.array([[0.1, -0.2]]))
+    Y, X, diverged = model.simulate(model.pack(values), U, np.array([0, 5]),
+                                    x0=np.array([0.1, -0.2]))
     assert not diverged
     np.testing.assert_allclose(Y, np.array(expected), rtol=1e-12)
     assert X.shape == (5, 2)
-
-
-def test_divergence_is_reported_and_filled_with_nan():
-    A, B, C, D, V, W, c = _random_model(3, 2, 1, 1, 1, 2)
-    W = 10.0 * np.ones_like(W)
-    c = np.ones_like(c)
-    U = 3.0 * np.ones((200, 1))
-    starts = np.array([0, 100, 200])
-    Y, X, diverged = simulate_decoupled(A, B, C, D, V, W, c, U, starts, np.zeros((2, 2)))
-    assert diverged
-    assert np.isnan(Y[99]) and np.isfinite(Y[0]).all()
-    Y_j, dY, diverged_j = jacobian_decoupled(A, B, C, D, V, W, c, U, starts, np.zeros((2, 2)))
-    assert diverged_j
-    np.testing.assert_array_equal(np.isnan(Y_j), np.isnan(Y))
 
 
 def test_stack_polynomials_takes_the_union_of_monomials():
@@ -160,8 +103,9 @@ def test_fitted_attributes(wiener_model):
 def test_paper_parameter_count():
     # n = 3, n_u = n_y = 1, r = 5, cubic branches, x0 estimated.
     linear, x0 = 9 + 3 + 3 + 1, 3
-    sizes = parameter_sizes(3, 1, 1, 5, 2)
-    assert sum(sizes) == linear + 20 + 20 + 10 + x0 == 69
+    model = StateSpaceModel(3, 1, 1, BranchTerms(3, 1, 1, 5, PolynomialBasis(3)),
+                            estimate_x0=True)
+    assert model.n_params == linear + 20 + 20 + 10 + x0 == 69
 
 
 def test_options_x0_validation_and_trajectory_sampling(wiener_data):
@@ -177,18 +121,6 @@ def test_options_x0_validation_and_trajectory_sampling(wiener_data):
     assert model.x0_.shape == (2,)
     assert model.n_params_ == 4 + 2 + 2 + 1 + (3 + 3 + 2) * 2 + 2
     assert model.score(u, y) > 0.99
-
-
-def test_fallback_starting_points_end_with_a_static_model(wiener_model):
-    model = wiener_model
-    pnlss = model.pnlss_
-    V, W, c = model.V_, model.W_, model.branch_coefficients_
-    candidates = list(_initial_parameters(pnlss, V, W, c, False))
-    first, last = candidates[0], candidates[-1]
-    np.testing.assert_array_equal(first[:4], pnlss.A_.ravel())
-    # The last one has A = B = C = 0 and no branches: it cannot diverge.
-    np.testing.assert_array_equal(last[: 4 + 2 + 2], 0.0)
-    np.testing.assert_array_equal(last[8], pnlss.D_.ravel())
 
 
 def test_pnlss_hyperparameters_are_nested():
@@ -217,17 +149,3 @@ def test_several_starts_in_parallel_match_sequential(wiener_data):
     single = DecoupledPNLSS(**{**params, "n_init": 1}).fit(u, y)
     # The first start is the same in both; the kept one is at least as good.
     assert sequential.loss_history_[-1] <= single.loss_history_[-1]
-
-
-@pytest.mark.slow
-@pytest.mark.realdata
-def test_cascaded_tanks(cascaded_tanks):
-    data = cascaded_tanks
-    # The paper's model: n = 3, r = 5, PNLSS-I of degrees 2 and 3; iterations
-    # and starts are selected on the last 30 % of the estimation record.
-    model = DecoupledPNLSS(
-        n_states=3, rank=5, estimate_x0=True, validation_fraction=0.3, n_init=8,
-        pnlss=PNLSSRegressor(degree=(2, 3)), random_state=0,
-    ).fit(data.X_est, data.y_est)
-    assert model.n_params_ <= 84
-    assert rms_error(data.y_test, model.predict(data.X_test)) <= 0.497

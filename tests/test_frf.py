@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter, lfiltic
 
-from sknlss._frf import lpm_frf, lpm_window, robust_frf
+from sknlss._linear._frf import lpm_frf, lpm_window, robust_frf
 from sknlss.signals import multisine
 
 # 4th-order SISO test system (two resonances), as polynomials in q^-1

@@ -5,7 +5,7 @@ import pytest
 from scipy.linalg import solve_discrete_lyapunov
 from scipy.signal import dlsim
 
-from sknlss._linear import (
+from sknlss._linear._realization import (
     balanced_realization,
     estimate_initial_state,
     frf_subspace,

@@ -5,7 +5,7 @@ import pytest
 from sklearn.exceptions import ConvergenceWarning
 
 from sknlss import DecoupledPNLSS, NLSS2Regressor, PNLSSRegressor
-from sknlss._optimize import levenberg_marquardt
+from sknlss._core._optimize import levenberg_marquardt
 
 
 def _rosenbrock(theta, jacobian):

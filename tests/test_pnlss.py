@@ -2,186 +2,23 @@ import warnings
 
 import numpy as np
 import pytest
-from _numeric import central_differences
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
-import sknlss._pnlss as pnlss_module
 from sknlss import BLAEstimator, PNLSSRegressor, SimulationDivergedWarning
-from sknlss.__main__ import MODELS
-from sknlss._base import DIVERGENCE_BOUND
-from sknlss._pnlss import _local_spectral_radius, _PNLSSProblem, _steady_state_rows
-from sknlss._pnlss_kernels import jacobian_pnlss, monomial_state_derivatives, simulate_pnlss
-from sknlss._polynomial import evaluate_monomials, monomial_exponents, monomial_jacobian
+from sknlss._core._model import StateSpaceModel
+from sknlss._terms._polynomial import monomial_jacobian
 from sknlss.datasets import make_cascaded_tanks, make_pnlss_reference
 from sknlss.metrics import rms_error
-
-STRUCTURES = ["full", "states_only", "no_cross_products", "inputs_only"]
-
-
-def _random_model(n, n_u, n_y, state_terms, output_terms, seed):
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(n, n))
-    A *= 0.7 / max(abs(np.linalg.eigvals(A)))
-    ez = monomial_exponents(n, n_u, (2, 3), state_terms)
-    ee = monomial_exponents(n, n_u, (2, 3), output_terms)
-    matrices = [
-        A,
-        rng.normal(size=(n, n_u)),
-        rng.normal(size=(n_y, n)),
-        rng.normal(size=(n_y, n_u)),
-        0.05 * rng.normal(size=(n, len(ez))),
-        0.05 * rng.normal(size=(n_y, len(ee))),
-    ]
-    return matrices, ez, ee
-
-
-def _reference_simulation(A, B, C, D, E, F, ez, ee, U, x0):
-    """Plain NumPy simulation of one sequence, independent of the kernels."""
-    x = x0.copy()
-    Y = np.empty((len(U), C.shape[0]))
-    for t, u in enumerate(U):
-        s = np.concatenate([x, u])[None]
-        Y[t] = C @ x + D @ u + F @ evaluate_monomials(s, ee)[0]
-        x = A @ x + B @ u + E @ evaluate_monomials(s, ez)[0]
-    return Y
-
-
-def _pack(matrices, x0=None):
-    parts = [m.ravel() for m in matrices]
-    if x0 is not None:
-        parts.append(x0)
-    return np.concatenate(parts)
-
-
-def test_simulation_matches_plain_numpy():
-    matrices, ez, ee = _random_model(3, 2, 2, "full", "states_only", seed=0)
-    rng = np.random.default_rng(1)
-    U = 0.3 * rng.normal(size=(60, 2))
-    starts = np.array([0, 25, 60])
-    x0 = rng.normal(size=(2, 3)) * 0.1
-    Y, X, diverged = simulate_pnlss(*matrices, ez, ee, U, starts, x0, DIVERGENCE_BOUND)
-    assert not diverged
-    for k in range(2):
-        rows = slice(starts[k], starts[k + 1])
-        expected = _reference_simulation(*matrices, ez, ee, U[rows], x0[k])
-        np.testing.assert_allclose(Y[rows], expected, rtol=1e-12, atol=1e-12)
-    np.testing.assert_array_equal(X[starts[:-1]], x0)
-    Yj, Xj, _, _ = jacobian_pnlss(*matrices, ez, ee, U, starts, x0, True,
-                                  DIVERGENCE_BOUND, np.arange(60))
-    np.testing.assert_allclose(Yj, Y, rtol=1e-14, atol=1e-14)
-    np.testing.assert_allclose(Xj, X, rtol=1e-14, atol=1e-14)
-
-
-@pytest.mark.parametrize("dims", [(2, 1, 1), (3, 2, 2)], ids=["SISO", "MIMO"])
-@pytest.mark.parametrize("structure", STRUCTURES)
-@pytest.mark.parametrize("estimate_x0", [False, True])
-def test_jacobian_matches_central_differences(dims, structure, estimate_x0):
-    n, n_u, n_y = dims
-    output_terms = STRUCTURES[(STRUCTURES.index(structure) + 1) % 4]
-    matrices, ez, ee = _random_model(n, n_u, n_y, structure, output_terms, seed=n + 1)
-    rng = np.random.default_rng(2)
-    U = 0.3 * rng.normal(size=(80, n_u))
-    starts = np.array([0, 30, 80])
-    x0_value = 0.2 * rng.normal(size=n)
-    theta = _pack(matrices, x0_value if estimate_x0 else None)
-    shapes = [m.shape for m in matrices]
-    fixed_x0 = np.zeros((2, n))
-
-    def simulate(th):
-        mats, x0 = pnlss_module._unpack(th, shapes, estimate_x0)
-        x0 = fixed_x0 if x0 is None else np.tile(x0, (2, 1))
-        return simulate_pnlss(*mats, ez, ee, U, starts, x0, DIVERGENCE_BOUND)[0]
-
-    x0 = np.tile(x0_value, (2, 1)) if estimate_x0 else fixed_x0
-    # Rows outside the cost (here the first 5 of each sequence) are not stored.
-    kept = np.ones(80, dtype=bool)
-    kept[[0, 1, 2, 3, 4, 30, 31, 32, 33, 34]] = False
-    rows = np.where(kept, np.cumsum(kept) - 1, -1)
-    Y, _, J, diverged = jacobian_pnlss(*matrices, ez, ee, U, starts, x0, estimate_x0,
-                                    DIVERGENCE_BOUND, rows)
-    assert not diverged
-    assert J.shape == (70, n_y, theta.size)
-    J_fd = central_differences(simulate, theta)[kept]
-    scale = np.abs(J).max(axis=(0, 1))
-    assert np.all(np.abs(J - J_fd).max(axis=(0, 1)) <= 1e-6 * np.maximum(scale, 1e-3))
-
-
-def test_frequency_residual_jacobian_matches_central_differences():
-    # The frequency-domain residual with steady-state prepending and weights:
-    # its Jacobian is the weighted DFT of the time-domain one.
-    matrices, ez, ee = _random_model(2, 1, 1, "full", "full", seed=3)
-    rng = np.random.default_rng(4)
-    period = 16
-    U = 0.5 * rng.normal(size=(3 * period, 1))
-    starts = np.array([0, 3 * period])
-    index, sim_starts, original = _steady_state_rows(starts, period)
-    Y = simulate_pnlss(*matrices, ez, ee, U[index], sim_starts, np.zeros((1, 2)),
-                       DIVERGENCE_BOUND)[0] + 0.01 * rng.normal(size=(len(index), 1))
-    problem = _PNLSSProblem(
-        np.ascontiguousarray(U[index]), Y, sim_starts, ez, ee, 2, True, original,
-        np.zeros(len(index), dtype=bool), period,
-    )
-    assert not np.allclose(problem.weights, 1.0)
-    theta = _pack(matrices, np.array([0.1, -0.1]))
-    r, J = problem.residual(theta, True)
-    assert r.shape == (2 * 3 * (period // 2 + 1),)
-    J_fd = central_differences(lambda th: problem.residual(th, False)[0], theta)
-    np.testing.assert_allclose(J, J_fd, rtol=1e-6, atol=1e-6 * np.abs(J).max())
-
-
-def test_local_spectral_radius_gradient_matches_central_differences():
-    (A, _, _, _, E, _), ez, _ = _random_model(3, 1, 1, "full", "full", seed=5)
-    E *= 10  # a strongly state-dependent Jacobian, with complex eigenvalues
-    S = 0.5 * np.random.default_rng(6).normal(size=(40, 4))
-    radius, gradient, dzeta = _local_spectral_radius(A, E, ez, S)
-    jacobians = A + np.einsum("iz,tzj->tij", E, dzeta)
-    np.testing.assert_allclose(radius, np.abs(np.linalg.eigvals(jacobians)).max(axis=1))
-    h = 1e-7
-    for i, j in [(0, 0), (1, 2), (2, 1)]:
-        step = np.zeros_like(A)
-        step[i, j] = h
-        fd = (_local_spectral_radius(A + step, E, ez, S)[0]
-              - _local_spectral_radius(A - step, E, ez, S)[0]) / (2 * h)
-        np.testing.assert_allclose(gradient[:, i, j], fd, rtol=1e-6, atol=1e-7)
-    for i, k in [(0, 3), (2, 17)]:
-        step = np.zeros_like(E)
-        step[i, k] = h
-        fd = (_local_spectral_radius(A, E + step, ez, S)[0]
-              - _local_spectral_radius(A, E - step, ez, S)[0]) / (2 * h)
-        expected = np.einsum("tj,tj->t", gradient[:, i, :], dzeta[:, k, :])
-        np.testing.assert_allclose(expected, fd, rtol=1e-6, atol=1e-7)
-
-
-def test_weight_decay_rows_have_an_exact_jacobian():
-    matrices, ez, ee = _random_model(2, 1, 1, "full", "full", seed=7)
-    rng = np.random.default_rng(8)
-    U = 0.3 * rng.normal(size=(60, 1))
-    starts = np.array([0, 60])
-    Y = simulate_pnlss(*matrices, ez, ee, U, starts, np.zeros((1, 2)), DIVERGENCE_BOUND)[0]
-    rows = np.ones(60, dtype=bool)
-    problem = _PNLSSProblem(U, Y + 0.01 * rng.normal(size=Y.shape), starts, ez, ee, 2,
-                            False, rows, ~rows, None, weight_decay=0.5)
-    theta = _pack(matrices)
-    problem.set_coefficient_scale(theta)
-    assert np.all(problem.coefficient_scale > 0)
-    r, J = problem.residual(theta, True)
-    assert r.shape == (60 + len(problem.polynomial_columns),)
-    J_fd = central_differences(lambda th: problem.residual(th, False)[0], theta)
-    np.testing.assert_allclose(J, J_fd, rtol=1e-6, atol=1e-6 * np.abs(J).max())
-
-
-def test_compiled_state_derivatives_match_the_monomial_jacobian():
-    exponents = monomial_exponents(3, 2, (2, 3), "full")
-    S = np.random.default_rng(9).normal(size=(20, 5))
-    np.testing.assert_allclose(monomial_state_derivatives(S, exponents, 3),
-                               monomial_jacobian(S, exponents)[:, :, :3], rtol=1e-13)
 
 
 def _max_local_radius(model, u):
     _, states = model.simulate(u, return_states=True)
     S = np.hstack([states, (u - model.u_offset_) / model.u_scale_])
-    return _local_spectral_radius(model.A_, model.E_, model.state_exponents_, S)[0].max()
+    n = model.n_states
+    dzeta = monomial_jacobian(S, model.state_exponents_)[:, :, :n]
+    jacobians = model.A_ + np.einsum("iz,tzj->tij", model.E_, dzeta)
+    return np.abs(np.linalg.eigvals(jacobians)).max()
 
 
 def test_stability_penalty_makes_the_model_locally_contracting():
@@ -209,21 +46,6 @@ def test_weight_decay_shrinks_the_polynomial_terms():
                                           max_iter=40), u, y)
         sizes.append(np.abs(np.r_[model.E_.ravel(), model.F_.ravel()]).sum())
     assert sizes[0] > sizes[1] > sizes[2]
-
-
-def test_divergence_is_reported():
-    matrices, ez, ee = _random_model(2, 1, 1, "full", "full", seed=0)
-    matrices[0] = 1.5 * np.eye(2)
-    U = np.ones((200, 1))
-    starts = np.array([0, 100, 200])
-    x0 = np.zeros((2, 2))
-    x0[1] = 1e-3
-    Y, X, diverged = simulate_pnlss(*matrices, ez, ee, U, starts, x0, DIVERGENCE_BOUND)
-    assert diverged
-    assert np.isnan(Y[99]) and np.isnan(X[199, 0])
-    assert np.all(np.isfinite(Y[:5]))
-    assert jacobian_pnlss(*matrices, ez, ee, U, starts, x0, False, DIVERGENCE_BOUND,
-                          np.arange(200))[3]
 
 
 @pytest.fixture(scope="module")
@@ -366,14 +188,14 @@ def test_fit_recovers_from_diverging_steps(monkeypatch):
     # polynomial model blow up; they must be rejected and the fit continue.
     data = make_cascaded_tanks(n_samples=400, random_state=0)
     diverged = []
-    original = pnlss_module.simulate_pnlss
+    original = StateSpaceModel.simulate
 
-    def recording(*args):
-        out = original(*args)
+    def recording(*args, **kwargs):
+        out = original(*args, **kwargs)
         diverged.append(out[2])
         return out
 
-    monkeypatch.setattr(pnlss_module, "simulate_pnlss", recording)
+    monkeypatch.setattr(StateSpaceModel, "simulate", recording)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         model = PNLSSRegressor(3, max_iter=50).fit(data.X_est, data.y_est)
@@ -420,57 +242,3 @@ def test_frequency_cost_needs_whole_periods():
     model = PNLSSRegressor(1, period=16, cost="frequency", validation_fraction=0.1)
     with pytest.raises(ValueError, match="whole number of periods"):
         model.fit(u, u[:, 0])
-
-
-# Cascaded Tanks, DESIGN.md section 3: the test record is used for nothing but
-# the final number; iterates and settings are selected on the end of the
-# estimation record. center=True was chosen by the validation error over four
-# splits of the estimation record (500/600/700/717 samples).
-#
-# With a single split (70/30) the held-out error is a poor guide: PNLSS-I gives
-# 0.55-0.75 V or a model that diverges on the test input over held-out shares
-# 0.25-0.35, PNLSS without x0 0.64-0.75 V or divergent. A stability penalty
-# (the local spectral radius along the fitted trajectory) with weight decay
-# removes the divergence: over stability_penalty in {0.1, 1, 10} x
-# weight_decay in {0, 1e-3, 1e-2, 0.1} x held-out shares {0.25, 0.3, 0.35} no
-# model diverged on the test input (4 of 12 without it); the weights with the
-# lowest median held-out error are 1 and 0.01.
-#
-# The main job fits each PNLSS model with and without those penalties, at
-# held-out shares 0.25 to 0.35, and keeps the fit with the smallest error on
-# the last 25 % of the estimation record, which none of them fitted
-# (HoldoutSearch; benchmarks/bench_cascaded_tanks_splits.py shows the spread
-# over the shares).
-
-
-def _fit_main_job_model(name, data):
-    factory = dict(MODELS)[name]
-    model = factory()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        model.fit(data.X_est, data.y_est)
-    return model
-
-
-@pytest.mark.slow
-@pytest.mark.realdata
-def test_cascaded_tanks_pnlss_i(cascaded_tanks):
-    data = cascaded_tanks
-    model = _fit_main_job_model("PNLSS-I", data)
-    assert model.n_params_ == 9 + 3 + 3 + 1 + 3 * 30 + 30 + 3
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", SimulationDivergedWarning)
-        y_test = model.predict(data.X_test)
-    assert rms_error(data.y_test, y_test) <= 0.40
-
-
-@pytest.mark.slow
-@pytest.mark.realdata
-def test_cascaded_tanks_pnlss_without_x0(cascaded_tanks):
-    data = cascaded_tanks
-    model = _fit_main_job_model("PNLSS", data)
-    assert model.n_params_ == 9 + 3 + 3 + 1 + 3 * 30 + 30
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", SimulationDivergedWarning)
-        y_test = model.predict(data.X_test)
-    assert rms_error(data.y_test, y_test) <= 0.62

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sknlss._polynomial import (
+from sknlss._terms._polynomial import (
     evaluate_monomials,
     monomial_exponents,
     monomial_jacobian,

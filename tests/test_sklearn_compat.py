@@ -19,7 +19,13 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import MinMaxScaler, StandardScaler
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from sknlss import BLAEstimator, DecoupledPNLSS, NLSS2Regressor, PNLSSRegressor
+from sknlss import (
+    BLAEstimator,
+    DecoupledPNLSS,
+    NLLFRRegressor,
+    NLSS2Regressor,
+    PNLSSRegressor,
+)
 from sknlss.metrics import make_transient_scorer, rms_error
 
 # A dynamical model's output at a sample depends on the samples before it, so
@@ -35,6 +41,7 @@ ESTIMATORS = [
     PNLSSRegressor(),
     NLSS2Regressor(),
     DecoupledPNLSS(),
+    NLLFRRegressor(),
 ]
 
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from sknlss._state_estimation import estimate_states
+from sknlss._linear._state_estimation import estimate_states
 
 
 def _linear_system(n_states, n_inputs, n_outputs, seed):

@@ -5,9 +5,8 @@ from numbers import Integral
 import numpy as np
 from sklearn.utils import Bunch, check_random_state
 
-from .._base import DIVERGENCE_BOUND
-from .._pnlss_kernels import simulate_pnlss
-from .._polynomial import monomial_exponents
+from .._core._model import StateSpaceModel
+from .._terms._polynomial import PolynomialTerms, monomial_exponents
 from ..signals import multisine
 
 # The true system: 2 states, 1 input, 1 output; E and F weigh the 16 monomials
@@ -129,9 +128,9 @@ def make_pnlss_reference(*, n_realizations=4, n_periods=3, n_samples_per_period=
     u, lines = multisine(n, n_periods=n_periods + 1, n_realizations=n_realizations,
                          lines="odd", band=(0.0, 0.45), rms=_RMS, random_state=rng)
     starts = np.arange(n_realizations + 1, dtype=np.int64) * u.shape[1]
-    y_all, _, _ = simulate_pnlss(_A, _B, _C, _D, _E, _F, exponents, exponents,
-                                 np.ascontiguousarray(u.reshape(-1, 1)), starts,
-                                 np.zeros((n_realizations, 2)), DIVERGENCE_BOUND)
+    model = StateSpaceModel(2, 1, 1, PolynomialTerms(2, 1, exponents, exponents))
+    theta = model.pack({"A": _A, "B": _B, "C": _C, "D": _D, "E": _E, "F": _F})
+    y_all = model.simulate(theta, u.reshape(-1, 1), starts)[0]
     # The first period of every realization is the transient from rest.
     y_clean = y_all[:, 0].reshape(n_realizations, -1)[:, n:]
     u = u[:, n:]

@@ -119,6 +119,7 @@ def levenberg_marquardt(
     n_iter_no_change=None,
     verbose=0,
     label="LM",
+    initial=None,
 ):
     """Minimise ``sum(residual(theta)**2)`` by Levenberg-Marquardt.
 
@@ -148,13 +149,15 @@ def levenberg_marquardt(
         Print one line per iteration when positive.
     label : str, default="LM"
         Prefix of the progress lines.
+    initial : tuple of ndarray, default=None
+        ``residual(theta0, True)`` when the caller has it already.
 
     Returns
     -------
     result : LMResult
     """
     theta = np.array(theta0, dtype=np.float64)
-    r, J = residual(theta, True)
+    r, J = residual(theta, True) if initial is None else initial
     if r is None or not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
         raise ValueError(
             "The initial model diverges or gives non-finite values on the "

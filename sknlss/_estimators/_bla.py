@@ -1,22 +1,30 @@
-"""Best Linear Approximation: nonparametric FRF, then a balanced state-space model."""
+"""Best Linear Approximation: nonparametric FRF, then a balanced state-space model.
 
+:func:`fit_linear_model` does the work on normalised signals and returns a
+:class:`LinearFit`; :class:`BLAEstimator` wraps it, and the nonlinear
+estimators call it for their initialisation and expose the result as a fitted
+:class:`BLAEstimator` in the user's units (:func:`fitted_bla`).
+"""
+
+from dataclasses import dataclass
 from numbers import Integral, Real
 
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 from threadpoolctl import threadpool_limits
 
-from ._base import _BaseStateSpace, transient_mask
-from ._frf import lpm_frf, robust_frf
-from ._linear import (
+from .._core._model import StateSpaceModel
+from .._core._sequences import transient_mask
+from .._linear._frf import lpm_frf, robust_frf
+from .._linear._realization import (
     balanced_realization,
     estimate_initial_state,
     frf_subspace,
     n_block_rows,
     refine_frf,
-    simulate_linear,
     ss_frf,
 )
+from ._base import _BaseStateSpace, normalisation_of
 
 # Variances below this fraction of the mean squared FRF magnitude (a relative
 # standard deviation of 1e-6) are treated as this floor, so that noise-free
@@ -39,6 +47,164 @@ def _weights(estimate, weighting):
     floor = _RELATIVE_VARIANCE_FLOOR * max(np.mean(np.abs(estimate.frf) ** 2),
                                            np.finfo(float).tiny)
     return 1.0 / np.sqrt(np.maximum(var, floor))
+
+
+@dataclass
+class LinearFit:
+    """A linear model fitted by :func:`fit_linear_model`, in normalised units.
+
+    Attributes
+    ----------
+    A, B, C, D : ndarray
+        Balanced realization.
+    x0 : ndarray of shape (n_states,)
+        Initial state (zero unless estimated).
+    output_offset : ndarray of shape (n_outputs,)
+        Output offset estimated with ``x0`` (zero unless estimated).
+    hankel_singular_values : ndarray or None
+    frequencies, frf, noise_variance, total_variance, frf_model
+        The nonparametric estimate and the model's FRF at its frequencies.
+    n_iter : int
+    loss_history : ndarray or None
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    x0: np.ndarray
+    output_offset: np.ndarray
+    hankel_singular_values: np.ndarray | None
+    frequencies: np.ndarray
+    frf: np.ndarray
+    noise_variance: np.ndarray | None
+    total_variance: np.ndarray | None
+    frf_model: np.ndarray
+    n_iter: int
+    loss_history: np.ndarray | None
+
+
+def _nonparametric(U, Y, starts, params):
+    method, period, n_transient = params["method"], params["period"], params["n_transient"]
+    if method == "auto":
+        method = "lpm" if period is None else "robust"
+    if method == "robust":
+        if period is None:
+            raise ValueError('method="robust" needs the `period` of the excitation.')
+        return robust_frf(U, Y, starts, period, n_transient=n_transient,
+                          max_frequency=params["max_frequency"])
+    shortest = int(np.diff(starts).min()) - n_transient
+    if shortest < 2:
+        raise ValueError(
+            f"A record of {shortest} sample(s) after n_transient={n_transient} "
+            "is too short for the Local Polynomial Method."
+        )
+    return lpm_frf(U, Y, starts, order=params["lpm_order"],
+                   bandwidth=params["lpm_bandwidth"], n_transient=n_transient,
+                   max_frequency=params["max_frequency"])
+
+
+def fit_linear_model(U, Y, starts, params):
+    """Fit the BLA on normalised signals.
+
+    Parameters
+    ----------
+    U, Y : ndarray
+        Normalised input and output.
+    starts : ndarray
+        Sequence boundaries.
+    params : dict
+        The parameters of a :class:`BLAEstimator`.
+
+    Returns
+    -------
+    fit : LinearFit
+    """
+    # The factorisations here are small: multithreaded BLAS only adds
+    # synchronisation cost (tenfold on two cores, see DESIGN.md §2).
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _fit_linear_model(U, Y, starts, params)
+
+
+def _fit_linear_model(U, Y, starts, params):
+    n, n_u, n_y = params["n_states"], U.shape[1], Y.shape[1]
+    estimate = _nonparametric(U, Y, starts, params)
+    n_freq = estimate.frequencies.size
+    n_free = n * (n_u + n_y) + n_y * n_u
+    if 2 * n_freq * n_y * n_u < n_free:
+        raise ValueError(
+            f"n_states={n} is too large for the {n_freq} frequency line(s) of the "
+            f"FRF: {2 * n_freq * n_y * n_u} real FRF values cannot determine "
+            f"{n_free} identifiable parameters. Use a longer record or fewer states."
+        )
+    n_block_rows(n, n_freq, n_u)
+    weight = _weights(estimate, params["weighting"])
+    G, freqs = estimate.frf, estimate.frequencies
+    A, B, C, D = frf_subspace(freqs, G, weight, n)
+    n_iter, loss_history = 0, None
+    if params["max_iter"] > 0:
+        A, B, C, D, result = refine_frf(A, B, C, D, freqs, G, weight,
+                                        max_iter=params["max_iter"], tol=params["tol"],
+                                        verbose=params["verbose"])
+        n_iter, loss_history = result.n_iter, result.loss_history
+    A, B, C, D, hsv = balanced_realization(A, B, C, D)
+    x0, output_offset = np.zeros(n), np.zeros(n_y)
+    if params["estimate_x0"]:
+        mask = transient_mask(starts, params["n_transient"])
+        x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask)
+    return LinearFit(A, B, C, D, x0, output_offset, hsv, freqs, G, estimate.noise_variance,
+                     estimate.total_variance, ss_frf(A, B, C, D, freqs), n_iter,
+                     loss_history)
+
+
+def _set_fitted(bla, fit, normalisation):
+    """Set the fitted attributes of ``bla`` from a fit on signals normalised by
+    ``normalisation`` (see :func:`normalisation_of`); FRFs in the user's units."""
+    for name, value in normalisation.items():
+        setattr(bla, name, value)
+    n, n_y = fit.A.shape[0], fit.C.shape[0]
+    bla.A_, bla.B_, bla.C_, bla.D_ = fit.A, fit.B, fit.C, fit.D
+    bla.x0_, bla.output_offset_ = fit.x0, fit.output_offset
+    bla.y_offset_ = normalisation["y_offset_"] + normalisation["y_scale_"] * fit.output_offset
+    bla.hankel_singular_values_ = fit.hankel_singular_values
+    bla.frequencies_ = fit.frequencies
+    scale = normalisation["y_scale_"][:, None] / normalisation["u_scale_"][None, :]
+    bla.frf_ = fit.frf * scale
+    bla.frf_model_ = fit.frf_model * scale
+    noise, total = fit.noise_variance, fit.total_variance
+    bla.noise_variance_ = None if noise is None else noise * scale**2
+    if total is None:
+        bla.total_variance_ = None
+    else:
+        bla.total_variance_ = bla.noise_variance_ if total is noise else total * scale**2
+    bla.n_iter_, bla.loss_history_ = fit.n_iter, fit.loss_history
+    bla.n_params_ = n * n + n * (fit.B.shape[1] + n_y) + n_y * fit.B.shape[1]
+    if bla.estimate_x0:
+        bla.n_params_ += n
+
+
+def fitted_bla(params, fit, normalisation):
+    """A fitted :class:`BLAEstimator` with the given parameters, from ``fit``.
+
+    Parameters
+    ----------
+    params : dict
+        Parameters of the estimator.
+    fit : LinearFit
+        Result of :func:`fit_linear_model` on signals normalised by
+        ``normalisation``.
+    normalisation : dict
+        The normalisation attributes of the estimator whose data were used
+        (:func:`normalisation_of`).
+
+    Returns
+    -------
+    bla : BLAEstimator
+        Predicts and reports its FRF in the user's units.
+    """
+    bla = BLAEstimator(**params)
+    _set_fitted(bla, fit, normalisation)
+    return bla
 
 
 class BLAEstimator(_BaseStateSpace):
@@ -252,103 +418,13 @@ class BLAEstimator(_BaseStateSpace):
         self.n_transient = n_transient
         self.verbose = verbose
 
-    def fit(self, X, y, *, sequence_id=None):
-        """Fit the BLA to input/output records.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_samples, n_inputs)
-            Input signal u; rows are time samples.
-        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
-            Measured output signal.
-        sequence_id : array-like of shape (n_samples,), default=None
-            Integer label of the record (realization) each row belongs to;
-            each label occupies one contiguous block of rows.
-
-        Returns
-        -------
-        self : object
-            The fitted estimator.
-        """
-        super().fit(X, y, sequence_id=sequence_id)
-        self.y_offset_ = self.y_offset_ + self.y_scale_ * self.output_offset_
-        # the nonparametric and model FRFs in the user's units
-        scale = self.y_scale_[:, None] / self.u_scale_[None, :]
-        self.frf_ = self.frf_ * scale
-        self.frf_model_ = self.frf_model_ * scale
-        noise, total = self.noise_variance_, self.total_variance_
-        if noise is not None:
-            self.noise_variance_ = noise * scale**2
-        if total is not None:
-            self.total_variance_ = (
-                self.noise_variance_ if total is noise else total * scale**2
-            )
-        return self
-
-    def _nonparametric(self, U, Y, starts):
-        method = self.method
-        if method == "auto":
-            method = "lpm" if self.period is None else "robust"
-        if method == "robust":
-            if self.period is None:
-                raise ValueError('method="robust" needs the `period` of the excitation.')
-            return robust_frf(U, Y, starts, self.period, n_transient=self.n_transient,
-                              max_frequency=self.max_frequency)
-        shortest = int(np.diff(starts).min()) - self.n_transient
-        if shortest < 2:
-            raise ValueError(
-                f"A record of {shortest} sample(s) after n_transient={self.n_transient} "
-                "is too short for the Local Polynomial Method."
-            )
-        return lpm_frf(U, Y, starts, order=self.lpm_order, bandwidth=self.lpm_bandwidth,
-                       n_transient=self.n_transient, max_frequency=self.max_frequency)
-
     def _fit_normalized(self, U, Y, starts):
-        # The factorisations here are small: multithreaded BLAS only adds
-        # synchronisation cost (tenfold on two cores, see DESIGN.md §2).
-        with threadpool_limits(limits=1, user_api="blas"):
-            return self._fit_linear(U, Y, starts)
+        _set_fitted(self, fit_linear_model(U, Y, starts, self.get_params()),
+                    normalisation_of(self))
 
-    def _fit_linear(self, U, Y, starts):
-        n, n_u, n_y = self.n_states, U.shape[1], Y.shape[1]
-        estimate = self._nonparametric(U, Y, starts)
-        n_freq = estimate.frequencies.size
-        n_free = n * (n_u + n_y) + n_y * n_u
-        if 2 * n_freq * n_y * n_u < n_free:
-            raise ValueError(
-                f"n_states={n} is too large for the {n_freq} frequency line(s) of the "
-                f"FRF: {2 * n_freq * n_y * n_u} real FRF values cannot determine "
-                f"{n_free} identifiable parameters. Use a longer record or fewer states."
-            )
-        n_block_rows(n, n_freq, n_u)
-        weight = _weights(estimate, self.weighting)
-        G, freqs = estimate.frf, estimate.frequencies
-        A, B, C, D = frf_subspace(freqs, G, weight, n)
-        self.n_iter_, self.loss_history_ = 0, None
-        if self.max_iter > 0:
-            A, B, C, D, result = refine_frf(A, B, C, D, freqs, G, weight,
-                                            max_iter=self.max_iter, tol=self.tol,
-                                            verbose=self.verbose)
-            self.n_iter_, self.loss_history_ = result.n_iter, result.loss_history
-        A, B, C, D, hsv = balanced_realization(A, B, C, D)
-        self.A_, self.B_, self.C_, self.D_ = A, B, C, D
-        self.hankel_singular_values_ = hsv
-        self.frequencies_ = freqs
-        self.frf_ = G
-        self.noise_variance_ = estimate.noise_variance
-        self.total_variance_ = estimate.total_variance
-        self.frf_model_ = ss_frf(A, B, C, D, freqs)
-        self.n_params_ = n * n + n_free
-        self.x0_, self.output_offset_ = np.zeros(n), np.zeros(n_y)
-        if self.estimate_x0:
-            mask = transient_mask(starts, self.n_transient)
-            self.x0_, self.output_offset_ = estimate_initial_state(A, B, C, D, U, Y,
-                                                                   starts, mask)
-            self.n_params_ += n
-        return self
-
-    def _simulate_normalized(self, U, starts, x0):
-        return simulate_linear(self.A_, self.B_, self.C_, self.D_, U, starts, x0)
+    def _fitted_model(self):
+        model = StateSpaceModel(self.A_.shape[0], self.B_.shape[1], self.C_.shape[0])
+        return model, model.pack({"A": self.A_, "B": self.B_, "C": self.C_, "D": self.D_})
 
     @property
     def poles_(self):

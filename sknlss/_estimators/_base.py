@@ -8,7 +8,8 @@ on normalised signals ``u_n = (u - u_offset_) / u_scale_`` and
 ``y_n = (y - y_offset_) / y_scale_``. The base class owns what is common to all
 of them: input validation, splitting the rows into sequences, the offsets and
 scales, the initial state, free-run simulation and scoring. Subclasses implement
-``_fit_normalized`` and ``_simulate_normalized``.
+``_fit_normalized`` and ``_fitted_model`` (the model structure and parameter
+vector the shared kernels simulate).
 """
 
 import warnings
@@ -21,123 +22,18 @@ from sklearn.metrics import r2_score
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-#: Largest absolute normalised state value a simulation may reach before it is
-#: declared divergent. Normalised signals have unit standard deviation, so any
-#: physically meaningful trajectory stays many orders of magnitude below it.
-DIVERGENCE_BOUND = 1e6
+from .._core._kernels import DIVERGENCE_BOUND
+from .._core._sequences import sequence_bounds, transient_mask
+from ..exceptions import SimulationDivergedWarning
+
+#: The fitted attributes that describe the normalisation of the signals.
+_NORMALISATION = ("n_features_in_", "n_outputs_", "_y_was_1d", "u_offset_", "u_scale_",
+                  "y_offset_", "y_scale_")
 
 
-class SimulationDivergedWarning(RuntimeWarning):
-    """Warning raised when a simulated trajectory leaves the bounded region.
-
-    The outputs from the first divergent sample to the end of that sequence are
-    set to NaN.
-    """
-
-
-def sequence_bounds(sequence_id, n_samples):
-    """Return the row boundaries of the sequences.
-
-    Parameters
-    ----------
-    sequence_id : array-like of shape (n_samples,) or None
-        Integer label of the experiment each row belongs to. Each label must
-        occupy one contiguous block of rows. ``None`` means a single sequence.
-    n_samples : int
-        Number of rows of ``X``.
-
-    Returns
-    -------
-    starts : ndarray of shape (n_sequences + 1,)
-        Sequence ``k`` occupies rows ``starts[k]:starts[k + 1]``.
-    """
-    if sequence_id is None:
-        return np.array([0, n_samples], dtype=np.int64)
-    ids = np.asarray(sequence_id)
-    if ids.ndim != 1 or ids.shape[0] != n_samples:
-        raise ValueError(
-            f"sequence_id must be a 1-D array with one label per sample: got shape "
-            f"{ids.shape} for X with {n_samples} samples."
-        )
-    if ids.dtype.kind not in "iub":
-        if ids.dtype.kind == "f" and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)):
-            ids = ids.astype(np.int64)
-        else:
-            raise ValueError(
-                f"sequence_id must hold integer labels, got dtype {ids.dtype}."
-            )
-    change = np.flatnonzero(ids[1:] != ids[:-1]) + 1
-    starts = np.concatenate(([0], change, [n_samples])).astype(np.int64)
-    run_labels = ids[starts[:-1]]
-    labels, counts = np.unique(run_labels, return_counts=True)
-    if np.any(counts > 1):
-        raise ValueError(
-            "sequence_id must label each sequence by one contiguous block of rows; "
-            f"label(s) {labels[counts > 1].tolist()} occur in separate blocks."
-        )
-    return starts
-
-
-def transient_mask(starts, n_transient):
-    """Boolean mask of the rows kept once ``n_transient`` samples per sequence are dropped."""
-    mask = np.ones(starts[-1], dtype=bool)
-    for begin, end in zip(starts[:-1], starts[1:]):
-        mask[begin : min(begin + n_transient, end)] = False
-    return mask
-
-
-def holdout_masks(starts, n_transient, validation_fraction):
-    """Rows used for the cost and rows held out for selection.
-
-    The last ``validation_fraction`` of every sequence is held out; the first
-    ``n_transient`` samples of every sequence are in neither set. Simulations run
-    over whole sequences, so the held-out tail continues from the state the
-    model reached at the end of the fitted part.
-
-    Returns
-    -------
-    fit_mask, validation_mask : ndarray of bool of shape (n_samples,)
-    """
-    fit_mask = transient_mask(starts, n_transient)
-    validation_mask = np.zeros_like(fit_mask)
-    if validation_fraction:
-        for begin, end in zip(starts[:-1], starts[1:]):
-            split = end - int(round(validation_fraction * (end - begin)))
-            validation_mask[max(split, begin + n_transient) : end] = True
-            fit_mask[split:end] = False
-    if not fit_mask.any():
-        raise ValueError(
-            f"n_transient={n_transient} and validation_fraction={validation_fraction} "
-            "leave no sample to fit."
-        )
-    return fit_mask, validation_mask
-
-
-def part_before_holdout(U, Y, starts, fit_mask):
-    """Each sequence from its start to its last fitted row, concatenated.
-
-    With masks from :func:`holdout_masks`, these are the sequences cut before
-    their held-out tails (their transients kept): the initialisations of the
-    nonlinear models see only these rows, so the tails stay unseen until the
-    iterate selection.
-
-    Returns
-    -------
-    U_part, Y_part : ndarray
-        The kept rows, C-contiguous.
-    starts_part : ndarray of shape (n_kept_sequences + 1,)
-        Boundaries of the kept parts; sequences without a fitted row are dropped.
-    """
-    segments = []
-    for begin, end in zip(starts[:-1], starts[1:]):
-        fitted = np.flatnonzero(fit_mask[begin:end])
-        if fitted.size:
-            segments.append((begin, begin + fitted[-1] + 1))
-    rows = np.concatenate([np.arange(begin, end) for begin, end in segments])
-    lengths = [end - begin for begin, end in segments]
-    starts_part = np.cumsum([0] + lengths).astype(np.int64)
-    return np.ascontiguousarray(U[rows]), np.ascontiguousarray(Y[rows]), starts_part
-
+def normalisation_of(estimator):
+    """The normalisation attributes of a fitted (or fitting) estimator, as a dict."""
+    return {name: getattr(estimator, name) for name in _NORMALISATION}
 
 def _robust_scale(values):
     """Standard deviation per column, with 1 where a column is (nearly) constant."""
@@ -216,12 +112,18 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """Fit on normalised signals split into sequences by ``starts``."""
 
     @abstractmethod
+    def _fitted_model(self):
+        """The fitted model: a :class:`~sknlss._core._model.StateSpaceModel`
+        and its parameter vector."""
+
     def _simulate_normalized(self, U, starts, x0):
         """Simulate from initial states ``x0`` of shape (n_sequences, n_states).
 
         Returns the normalised outputs (n_samples, n_outputs), the states
         (n_samples, n_states) and a flag telling whether a trajectory diverged.
         """
+        model, theta = self._fitted_model()
+        return model.simulate(theta, U, starts, x0)
 
     def _set_search_result(self, result):
         """Store the history of the Levenberg-Marquardt search that was kept."""

@@ -11,7 +11,7 @@
   support, and the projection of a model onto them;
 - :func:`balanced_realization`: square-root balancing of a stable discrete-time
   model;
-- :func:`simulate_linear` and :func:`estimate_initial_state`: compiled free-run
+- :func:`simulate_linear` and :func:`estimate_initial_state`: free-run
   simulation and the least-squares initial state.
 
 Frequencies are in cycles per sample: ``z = exp(2j pi f)``.
@@ -20,13 +20,11 @@ Frequencies are in cycles per sample: ``z = exp(2j pi f)``.
 import warnings
 
 import numpy as np
-from numba import njit
 from scipy.linalg import solve_discrete_lyapunov
 from sklearn.exceptions import ConvergenceWarning
 
-from ._base import DIVERGENCE_BOUND
-from ._kernels import out_of_bounds, state_space_step
-from ._optimize import LMResult, levenberg_marquardt
+from .._core._model import StateSpaceModel
+from .._core._optimize import LMResult, levenberg_marquardt
 
 # Spectral radius allowed for any fitted BLA whatever the data: the model must
 # be simulated, so the refinement rejects steps that leave the unit disc with
@@ -343,31 +341,6 @@ def balanced_realization(A, B, C, D):
     return sign[:, None] * Ab * sign, sign[:, None] * Bb, Cb * sign, D.copy(), s
 
 
-@njit(cache=True)
-def _simulate_kernel(A, B, C, D, U, starts, x0, bound):
-    n_samples = U.shape[0]
-    n = A.shape[0]
-    n_y = C.shape[0]
-    Y = np.full((n_samples, n_y), np.nan)
-    X = np.full((n_samples, n), np.nan)
-    no_state_term = np.zeros(n)
-    no_output_term = np.zeros(n_y)
-    x = np.empty(n)
-    x_next = np.empty(n)
-    diverged = False
-    for k in range(starts.shape[0] - 1):
-        x[:] = x0[k]
-        for t in range(starts[k], starts[k + 1]):
-            if out_of_bounds(x, bound):
-                diverged = True
-                break
-            X[t] = x
-            state_space_step(A, B, C, D, x, U[t], no_state_term, no_output_term, x_next,
-                             Y[t])
-            x[:] = x_next
-    return Y, X, diverged
-
-
 def simulate_linear(A, B, C, D, U, starts, x0):
     """Free-run simulation of a linear model over the sequences.
 
@@ -388,11 +361,9 @@ def simulate_linear(A, B, C, D, U, starts, x0):
     states : ndarray of shape (n_samples, n)
     diverged : bool
     """
-    f = np.ascontiguousarray
-    return _simulate_kernel(f(A, dtype=np.float64), f(B, dtype=np.float64),
-                            f(C, dtype=np.float64), f(D, dtype=np.float64),
-                            f(U, dtype=np.float64), f(starts, dtype=np.int64),
-                            f(x0, dtype=np.float64), DIVERGENCE_BOUND)
+    model = StateSpaceModel(A.shape[0], B.shape[1], C.shape[0])
+    theta = model.pack({"A": A, "B": B, "C": C, "D": D})
+    return model.simulate(theta, U, starts, x0)
 
 
 def estimate_initial_state(A, B, C, D, U, Y, starts, mask):

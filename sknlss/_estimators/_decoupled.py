@@ -2,27 +2,31 @@
 
 The multivariate polynomials ``E zeta`` and ``F eta`` of a fitted PNLSS model
 are replaced by ``W g(V^T [x; u])`` with ``r`` univariate branches, computed from
-the CPD of their Jacobians (:func:`~sknlss._decouple.decouple_polynomial`); the
+the CPD of their Jacobians (:func:`~sknlss._terms._cpd.decouple_polynomial`); the
 decoupled model is then re-optimised on the simulation error.
 """
 
-from numbers import Integral, Real
+from numbers import Integral
 
 import numpy as np
 from sklearn.base import clone
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
-from sklearn.utils.parallel import Parallel, delayed
 
-from ._base import _BaseStateSpace, holdout_masks
-from ._decouple import decouple_polynomial
-from ._decoupled_kernels import jacobian_decoupled, parameter_sizes, simulate_decoupled
-from ._optimize import levenberg_marquardt
+from .._terms._bases import PolynomialBasis
+from .._terms._branches import BranchTerms
+from .._terms._cpd import decouple_polynomial
+from ._nonlinear import _BaseNonlinearStateSpace
+from ._pnlss import PNLSSRegressor
 
 # Factors applied to W when the decoupled initial model diverges on the
 # estimation data: the branches are shrunk until the simulation stays bounded
 # (the last factor leaves the PNLSS's linear part).
 _SHRINK_FACTORS = (1.0, 0.5, 0.25, 0.1, 0.01, 0.0)
+
+# The PNLSS settings that the decoupled model passes on to its PNLSS model.
+_FORWARDED = ("n_states", "estimate_x0", "period", "cost", "validation_fraction",
+              "n_transient")
 
 
 def _stack_polynomials(E, state_exponents, F, output_exponents):
@@ -44,118 +48,27 @@ def _stack_polynomials(E, state_exponents, F, output_exponents):
     return coefficients, exponents
 
 
-def _sampling_points(pnlss, U, starts, fit_mask, sampling, n_points, rng):
+def _sampling_points(points, sampling, n_points, rng):
     """Sampling points in the region where the PNLSS model operates.
 
     The PNLSS states are not normalised (they may have large offsets and
     spreads), so the points follow the distribution of the model's own
-    simulated ``[x; u]`` on the fitted rows: the rows themselves
+    simulated ``[x; u]`` on the fitted rows (``points``): the rows themselves
     (``"trajectory"``) or a normal distribution with their mean and
     covariance (``"normal"``).
     """
-    x0 = np.tile(pnlss.x0_, (len(starts) - 1, 1))
-    _, states, _ = pnlss._simulate_normalized(U, starts, x0)
-    S = np.hstack([states, U])[fit_mask]
-    S = S[np.all(np.isfinite(S), axis=1)]
-    if len(S) < 2:
-        return rng.standard_normal((n_points, S.shape[1]))
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if len(points) < 2:
+        return rng.standard_normal((n_points, points.shape[1]))
     if sampling == "normal":
-        return rng.multivariate_normal(S.mean(axis=0), np.cov(S, rowvar=False), size=n_points)
-    if len(S) > n_points:
-        S = S[rng.choice(len(S), n_points, replace=False)]
-    return S
+        return rng.multivariate_normal(points.mean(axis=0), np.cov(points, rowvar=False),
+                                       size=n_points)
+    if len(points) > n_points:
+        points = points[rng.choice(len(points), n_points, replace=False)]
+    return points
 
 
-def _initial_parameters(pnlss, V, W, c, estimate_x0):
-    """Starting points of the re-optimisation, tried in turn until one
-    simulates without diverging: the decoupled PNLSS, then with its branches
-    shrunk towards the PNLSS's linear part, and finally a static model
-    (A = B = C = 0), which cannot diverge."""
-    x0 = [pnlss.x0_] if estimate_x0 else []
-    linear = [pnlss.A_, pnlss.B_, pnlss.C_, pnlss.D_]
-    for factor in _SHRINK_FACTORS:
-        yield np.concatenate([np.ravel(m) for m in (*linear, V, factor * W, c, *x0)])
-    static = [np.zeros_like(m) for m in linear[:3]] + [pnlss.D_]
-    yield np.concatenate([np.ravel(m) for m in (*static, V, 0 * W, c, *x0)])
-
-
-def _fit_one_start(pnlss, U, Y, starts, fit_mask, val_mask, seed, *, rank, degree,
-                   sampling, n_sampling_points, n_restarts, estimate_x0, max_iter, tol,
-                   verbose, label, n_iter_no_change=None):
-    """Decouple the fitted PNLSS with one random draw, then re-optimise.
-
-    Returns the parameter matrices ``(A, B, C, D, V, W, c)``, ``x0``, the
-    optimiser's :class:`~sknlss._optimize.LMResult` and the decoupling error.
-    """
-    rng = check_random_state(seed)
-    n, n_u, n_y = pnlss.A_.shape[0], U.shape[1], Y.shape[1]
-    coefficients, exponents = _stack_polynomials(
-        pnlss.E_, pnlss.state_exponents_, pnlss.F_, pnlss.output_exponents_
-    )
-    if len(exponents):
-        V, W, c, error = decouple_polynomial(
-            coefficients, exponents, rank, degree=degree,
-            sampling_points=_sampling_points(pnlss, U, starts, fit_mask, sampling,
-                                             n_sampling_points, rng),
-            n_restarts=n_restarts, random_state=rng,
-        )
-    else:
-        # A PNLSS without monomials: zero branches in random directions.
-        V, W = rng.standard_normal((n + n_u, rank)), np.zeros((n + n_y, rank))
-        c, error = np.zeros((rank, degree - 1)), 0.0
-
-    sizes = parameter_sizes(n, n_u, n_y, rank, degree - 1)
-    shapes = [(n, n), (n, n_u), (n_y, n), (n_y, n_u), (n + n_u, rank), (n + n_y, rank),
-              (rank, degree - 1)]
-    splits = np.cumsum(sizes[:-1])
-    n_theta = splits[-1] + (n if estimate_x0 else 0)
-    n_seq = len(starts) - 1
-    target = Y[fit_mask].ravel()
-
-    def unpack(theta):
-        blocks = np.split(theta, splits)
-        matrices = [np.ascontiguousarray(b.reshape(s)) for b, s in zip(blocks, shapes)]
-        x0 = blocks[-1] if estimate_x0 else np.zeros(n)
-        return matrices, np.ascontiguousarray(np.tile(x0, (n_seq, 1)))
-
-    def residual(theta, jacobian):
-        matrices, x0 = unpack(theta)
-        if jacobian:
-            Y_model, dY, diverged = jacobian_decoupled(*matrices, U, starts, x0)
-        else:
-            Y_model, _, diverged = simulate_decoupled(*matrices, U, starts, x0)
-        if diverged:
-            return None, None
-        r = Y_model[fit_mask].ravel() - target
-        if not jacobian:
-            return r, None
-        return r, dY[fit_mask][:, :, :n_theta].reshape(r.size, n_theta)
-
-    validation_loss = None
-    if val_mask.any():
-        def validation_loss(theta):
-            matrices, x0 = unpack(theta)
-            Y_model, _, diverged = simulate_decoupled(*matrices, U, starts, x0)
-            if diverged:
-                return np.inf
-            return float(np.mean((Y_model[val_mask] - Y[val_mask]) ** 2))
-
-    for theta0 in _initial_parameters(pnlss, V, W, c, estimate_x0):
-        r, J = residual(theta0, True)
-        if r is not None and np.all(np.isfinite(r)) and np.all(np.isfinite(J)):
-            break
-    result = levenberg_marquardt(
-        residual, theta0, validation_loss=validation_loss, max_iter=max_iter, tol=tol,
-        n_iter_no_change=n_iter_no_change,
-        # Similarity transforms of the states and the scaling of each branch's
-        # input and output leave the simulated output unchanged.
-        n_drop=n * n + 2 * rank, verbose=verbose, label=label,
-    )
-    matrices, x0 = unpack(result.theta)
-    return matrices, x0[0].copy(), result, error
-
-
-class DecoupledPNLSS(_BaseStateSpace):
+class DecoupledPNLSS(_BaseNonlinearStateSpace):
     """PNLSS model whose polynomials are decoupled into univariate branches.
 
     The model is, in the PNLSS model's scaled signal units, with
@@ -199,14 +112,29 @@ class DecoupledPNLSS(_BaseStateSpace):
         PNLSS model); ``predict`` then starts from ``x0_``.
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
-        ``n_states``, ``estimate_x0``, ``validation_fraction`` and
-        ``n_transient`` from this estimator, and its normalisation of the
-        signals (e.g. ``center``) is used by the decoupled model too. Its own
-        hyperparameters are tunable as ``pnlss__degree`` and so on. ``None``
-        uses ``PNLSSRegressor()``. The re-optimisation simulates every
-        sequence from its start (the PNLSS's steady-state option for
-        periodic data is not used; exclude the transient with
-        ``n_transient``).
+        ``n_states``, ``estimate_x0``, ``period``, ``cost``,
+        ``validation_fraction`` and ``n_transient`` from this estimator, and
+        its normalisation of the signals (``center``) is used by the decoupled
+        model too. Its own hyperparameters are tunable as ``pnlss__degree``
+        and so on. ``None`` uses ``PNLSSRegressor()``.
+    period : int, default=None
+        Number of samples per period of a periodic excitation. When set, every
+        sequence must be a whole number of periods; each sequence is then
+        simulated in steady state by prepending its last ``n_transient``
+        samples (excluded from the cost), in ``fit`` and in ``predict``.
+    cost : {"time", "frequency"}, default="time"
+        Time-domain simulation error, or its per-period DFT weighted by the
+        inverse noise standard deviation (paper eq. 17; needs ``period``).
+    stability_penalty : float, default=0.0
+        Weight of a penalty on local instability along the fitted trajectory:
+        the mean squared excess over 1 of the spectral radius of the state
+        map's Jacobian ``A + W_x diag(g'(V^T s)) V_x^T`` at every fitted
+        sample, relative to the mean squared residual.
+    weight_decay : float, default=0.0
+        Weight of the squared size of the branches, relative to the mean
+        squared residual: the output directions W and the branch
+        coefficients, each coefficient scaled by the RMS of its power of the
+        branch input along the initial trajectory.
     max_iter : int, default=100
         Maximum number of Levenberg-Marquardt iterations of the re-optimisation.
     tol : float, default=1e-9
@@ -252,6 +180,11 @@ class DecoupledPNLSS(_BaseStateSpace):
         Initial state (zero unless ``estimate_x0``).
     pnlss_ : PNLSSRegressor
         The fitted PNLSS model that was decoupled.
+    bla_ : BLAEstimator
+        The fitted linear model of the PNLSS model's initialisation; it
+        predicts and reports its FRF in the user's units.
+    branch_degree_ : int
+        Degree of the branches used.
     decoupling_error_ : float
         Relative error of the decoupled Jacobian tensor in the sampling points
         (of the kept start).
@@ -312,24 +245,17 @@ class DecoupledPNLSS(_BaseStateSpace):
     """
 
     _parameter_constraints: dict = {
-        **_BaseStateSpace._parameter_constraints,
-        "n_states": [Interval(Integral, 1, None, closed="left")],
+        **{key: value for key, value in _BaseNonlinearStateSpace._parameter_constraints.items()
+           if key not in ("bla", "refine_linear")},
         "rank": [Interval(Integral, 1, None, closed="left")],
         "branch_degree": [Interval(Integral, 2, None, closed="left"), None],
         "n_sampling_points": [Interval(Integral, 1, None, closed="left")],
         "sampling": [StrOptions({"normal", "trajectory"})],
-        "estimate_x0": ["boolean"],
         "pnlss": [HasMethods(["fit", "get_params"]), None],
-        "max_iter": [Interval(Integral, 0, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
-        "validation_fraction": [Interval(Real, 0, 1, closed="left")],
-        "n_iter_no_change": [Interval(Integral, 1, None, closed="left"), None],
         "n_restarts": [Interval(Integral, 1, None, closed="left")],
-        "n_init": [Interval(Integral, 1, None, closed="left")],
-        "n_jobs": [Integral, None],
-        "random_state": ["random_state"],
-        "verbose": ["verbose"],
     }
+
+    _label = "DecoupledPNLSS"
 
     def __init__(
         self,
@@ -341,6 +267,10 @@ class DecoupledPNLSS(_BaseStateSpace):
         sampling="normal",
         estimate_x0=False,
         pnlss=None,
+        period=None,
+        cost="time",
+        stability_penalty=0.0,
+        weight_decay=0.0,
         max_iter=100,
         tol=1e-9,
         validation_fraction=0.0,
@@ -359,6 +289,10 @@ class DecoupledPNLSS(_BaseStateSpace):
         self.sampling = sampling
         self.estimate_x0 = estimate_x0
         self.pnlss = pnlss
+        self.period = period
+        self.cost = cost
+        self.stability_penalty = stability_penalty
+        self.weight_decay = weight_decay
         self.max_iter = max_iter
         self.tol = tol
         self.validation_fraction = validation_fraction
@@ -370,67 +304,109 @@ class DecoupledPNLSS(_BaseStateSpace):
         self.n_transient = n_transient
         self.verbose = verbose
 
-    # ------------------------------------------------------------------ fit
-    def _validate_training_data(self, X, y, sequence_id):
-        """Validate and scale the data exactly as the PNLSS model does.
+    def fit(self, X, y, *, sequence_id=None):
+        """Fit the PNLSS model, decouple it and re-optimise the decoupled model.
 
-        The decoupled model replaces the PNLSS polynomials in the PNLSS's own
-        coordinates, so the PNLSS template decides the normalisation (e.g.
-        whether the signals are centred); its fitted attributes are shared.
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal u; rows are time samples.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+            Measured output signal.
+        sequence_id : array-like of shape (n_samples,), default=None
+            Integer label of the experiment each row belongs to; each label
+            occupies one contiguous block of rows.
+
+        Returns
+        -------
+        self : object
+            The fitted estimator.
         """
-        from ._pnlss import PNLSSRegressor
-
+        self._validate_params()
         pnlss = clone(self.pnlss if self.pnlss is not None else PNLSSRegressor())
-        pnlss.set_params(
-            n_states=self.n_states,
-            estimate_x0=self.estimate_x0,
-            validation_fraction=self.validation_fraction,
-            n_transient=self.n_transient,
-        )
-        U, Y, starts = pnlss._validate_training_data(X, y, sequence_id)
-        for name in ("n_features_in_", "feature_names_in_", "n_outputs_", "_y_was_1d",
-                     "u_offset_", "u_scale_", "y_offset_", "y_scale_"):
-            if hasattr(pnlss, name):
-                setattr(self, name, getattr(pnlss, name))
-            elif hasattr(self, name):
-                delattr(self, name)
-        self.pnlss_ = pnlss
-        return U, Y, starts
+        pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
+        self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
+        return super().fit(X, y, sequence_id=sequence_id)
 
-    def _fit_normalized(self, U, Y, starts):
-        fit_mask, val_mask = holdout_masks(starts, self.n_transient, self.validation_fraction)
+    def _centred(self):
+        # The decoupled model replaces the PNLSS polynomials in the PNLSS's own
+        # coordinates.
+        return self.pnlss_.get_params()["center"]
+
+    def _branch_degree(self):
+        if self.branch_degree is not None:
+            return self.branch_degree
         pnlss = self.pnlss_
-        pnlss._fit_normalized(U, Y, starts)
-        degree = self.branch_degree
-        if degree is None:
-            exponents = np.vstack([pnlss.state_exponents_, pnlss.output_exponents_])
-            degree = max(2, int(exponents.sum(axis=1).max())) if len(exponents) else 2
+        exponents = np.vstack([pnlss.state_exponents_, pnlss.output_exponents_])
+        return max(2, int(exponents.sum(axis=1).max())) if len(exponents) else 2
 
-        rng = check_random_state(self.random_state)
-        seeds = rng.randint(np.iinfo(np.int32).max, size=self.n_init)
-        options = dict(
-            rank=self.rank, degree=degree, sampling=self.sampling,
-            n_sampling_points=self.n_sampling_points, n_restarts=self.n_restarts,
-            estimate_x0=bool(self.estimate_x0), max_iter=self.max_iter, tol=self.tol,
-            n_iter_no_change=self.n_iter_no_change,
-            verbose=self.verbose,
-        )
-        runs = Parallel(n_jobs=self.n_jobs)(
-            delayed(_fit_one_start)(pnlss, U, Y, starts, fit_mask, val_mask, seed,
-                                    label=f"DecoupledPNLSS start {i}", **options)
-            for i, seed in enumerate(seeds)
-        )
-        scores = [result.selection_loss for _, _, result, _ in runs]
-        matrices, x0, result, self.decoupling_error_ = runs[int(np.argmin(scores))]
-        (self.A_, self.B_, self.C_, self.D_, self.V_, self.W_,
-         self.branch_coefficients_) = matrices
-        self.x0_ = x0
-        self.n_params_ = int(result.theta.size)
-        self._set_search_result(result)
-        return self
+    def _make_terms(self, n_inputs, n_outputs):
+        self.branch_degree_ = self._branch_degree()
+        return BranchTerms(self.n_states, n_inputs, n_outputs, self.rank,
+                           PolynomialBasis(self.branch_degree_))
 
-    def _simulate_normalized(self, U, starts, x0):
-        return simulate_decoupled(
-            self.A_, self.B_, self.C_, self.D_, self.V_, self.W_,
-            self.branch_coefficients_, U, starts, x0,
+    def _n_drop(self, model):
+        # Similarity transforms of the states and the scaling of each branch's
+        # input and output leave the simulated output unchanged.
+        return model.n_states**2 + 2 * self.rank
+
+    def _linear_start(self, U, Y, starts, fit_mask):
+        pnlss = self.pnlss_
+        self.bla_ = pnlss.bla_
+        return pnlss.A_, pnlss.B_, pnlss.C_, pnlss.D_, pnlss.x0_
+
+    def _prepare_starts(self, context):
+        pnlss, starts, rows = self.pnlss_, context["starts"], context["rows"]
+        if self.weight_decay:
+            context["problem"].set_decay_scale(context["theta"])
+        X = context["U"] * self.u_scale_ + self.u_offset_
+        sequence_id = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
+        states = pnlss.simulate(X, sequence_id=sequence_id, return_states=True)[1]
+        context["points"] = np.hstack([states, context["U"]])[rows.fit_rows[rows.original]]
+        context["polynomial"] = _stack_polynomials(pnlss.E_, pnlss.state_exponents_,
+                                                   pnlss.F_, pnlss.output_exponents_)
+
+    def _refined_linear_start(self, problem, theta):
+        # The PNLSS model's own settings decide how its linear part is refined.
+        return theta
+
+    def _decoupling(self, context, seed):
+        """The PNLSS polynomials decoupled with one random draw of the sampling
+        points and CPD initialisations: ``V, W, c`` and the decoupling error."""
+        rng = check_random_state(seed)
+        model = context["model"]
+        n, n_u, n_y = model.n_states, model.n_inputs, model.n_outputs
+        coefficients, exponents = context["polynomial"]
+        if not len(exponents):
+            # A PNLSS without monomials: zero branches in random directions.
+            V, W = rng.standard_normal((n + n_u, self.rank)), np.zeros((n + n_y, self.rank))
+            return V, W, np.zeros((self.rank, self.branch_degree_ - 1)), 0.0
+        return decouple_polynomial(
+            coefficients, exponents, self.rank, degree=self.branch_degree_,
+            sampling_points=_sampling_points(context["points"], self.sampling,
+                                             self.n_sampling_points, rng),
+            n_restarts=self.n_restarts, random_state=rng,
         )
+
+    def _record_start(self, context, start, seed):
+        self.decoupling_error_ = self._decoupling(context, seed)[3]
+
+    def _starting_points(self, context, start, seed):
+        """The decoupled PNLSS, then with its branches shrunk towards the PNLSS's
+        linear part, and finally a static model (A = B = C = 0), which cannot
+        diverge."""
+        model = context["model"]
+        V, W, c, _ = self._decoupling(context, seed)
+        values = model.unpack(context["theta"])
+        values.update(V=V, coefficients=c)
+        for factor in _SHRINK_FACTORS:
+            yield model.pack(dict(values, W=factor * W))
+        static = {key: np.zeros_like(values[key]) for key in "ABC"}
+        yield model.pack(dict(values, W=0 * W, **static))
+
+    def _set_terms(self, values):
+        self.V_, self.W_ = values["V"], values["W"]
+        self.branch_coefficients_ = values["coefficients"]
+
+    def _terms_values(self):
+        return {"V": self.V_, "coefficients": self.branch_coefficients_, "W": self.W_}

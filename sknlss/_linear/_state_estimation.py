@@ -12,8 +12,15 @@ O(N n^2) memory.
 """
 
 import numpy as np
-from scipy.linalg import LinAlgError, solveh_banded
+from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 from threadpoolctl import threadpool_limits
+
+
+# Squared Cholesky pivots (Schur complements) below this fraction of the
+# largest diagonal entry of the normal matrix count as zero: rounding leaves
+# pivots of about 1e-16 of it where the matrix is singular, while the ridge
+# the estimators add keeps every pivot above 1e-9 of it.
+_PIVOT_TOLERANCE = 1e-12
 
 
 def _check_model(A, B, C, D, n_inputs, n_outputs):
@@ -103,7 +110,7 @@ def estimate_states(U, Y, starts, A, B, C, D, alpha, *, ridge=0.0):
     Examples
     --------
     >>> import numpy as np
-    >>> from sknlss._state_estimation import estimate_states
+    >>> from sknlss._linear._state_estimation import estimate_states
     >>> A, B, C, D = [[0.5]], [[1.0]], [[1.0]], [[0.0]]
     >>> u = np.ones((5, 1))
     >>> y = np.array([[0.0], [1.0], [1.5], [1.75], [1.875]])
@@ -149,12 +156,19 @@ def _solve_sequence(U, Y, A, B, C, D, alpha, ridge):
     rhs[:-1] -= alpha * BU @ A
     rhs[1:] += alpha * BU
     ab = _banded_normal_matrix(A, C, alpha, ridge, n_samples)
+    scale = np.abs(ab[0]).max()
+    singular = ValueError(
+        "The state-estimation normal equations are singular: the states of this "
+        f"linear model are not observable from a sequence of {n_samples} samples."
+    )
     try:
-        solution = solveh_banded(ab, rhs.ravel(), lower=True, overwrite_ab=True,
-                                 overwrite_b=True, check_finite=False)
+        factor = cholesky_banded(ab, lower=True, check_finite=False)
     except LinAlgError as exc:
-        raise ValueError(
-            "The state-estimation normal equations are singular: the states of this "
-            f"linear model are not observable from a sequence of {n_samples} samples."
-        ) from exc
+        raise singular from exc
+    # A singular matrix can still factor, rounding leaving a pivot of the
+    # order of eps times its scale: the rank is decided with a tolerance.
+    if not np.min(factor[0]) ** 2 > _PIVOT_TOLERANCE * scale:
+        raise singular
+    solution = cho_solve_banded((factor, True), rhs.ravel(), overwrite_b=True,
+                                check_finite=False)
     return solution.reshape(n_samples, n)

@@ -30,7 +30,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 from tensorly.decomposition import parafac
 
-from ._optimize import levenberg_marquardt
+from .._core._optimize import levenberg_marquardt
 from ._polynomial import evaluate_monomials, monomial_jacobian
 
 # ALS for the CPD: iterations per restart and the stopping tolerance on the

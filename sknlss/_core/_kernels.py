@@ -1,0 +1,460 @@
+"""The compiled simulation kernels shared by every state-space model.
+
+Every model of the library, linear or not, is
+
+    x(t+1) = A x(t) + B u(t) + h_x(s(t)),
+    y(t)   = C x(t) + D u(t) + h_y(s(t)),      s(t) = [x(t); u(t)],
+
+in normalised signal units, where ``h = [h_x; h_y]`` (n_states + n_outputs
+values) are the model's nonlinear terms. A model supplies its terms as three
+compiled functions with the fixed signatures below (see ``sknlss._terms``);
+the kernels here own everything else once for all models: the time loop, the
+linear part, the initial state, the divergence rule and the forward
+sensitivities.
+
+The parameter vector of every model is
+
+    theta = [vec(A), vec(B), vec(C), vec(D), theta_terms, x0]
+
+(row-major ``vec``; ``x0`` only when the initial state is estimated, shared
+by all sequences). The terms' parameters ``theta_terms`` are laid out by the
+terms object that owns them.
+
+**The terms contract.** With ``spec`` an integer array describing the terms'
+structure and ``work`` a scratch array of the size the terms ask for:
+
+- ``evaluate(theta_terms, spec, s, n_states, h, work)`` writes ``h(s)``;
+- ``state_jacobian(theta_terms, spec, s, n_states, dh_dx, work)`` writes the
+  derivatives of ``h`` with respect to the states, shape
+  (n_states + n_outputs, n_states); it is called right after ``evaluate`` at
+  the same point and may read what ``evaluate`` left in ``work``;
+- ``parameter_jacobian(theta_terms, spec, s, n_states, work, state_out,
+  state_offset, output_out, output_offset)`` adds the derivatives of ``h_x``
+  with respect to ``theta_terms[k]`` to ``state_out[:, state_offset + k]`` for
+  the parameters that enter ``h_x`` (they come first in ``theta_terms``), and
+  those of ``h_y`` to ``output_out[:, output_offset + k]`` for all of them;
+  ``output_offset < 0`` means the output rows are not needed. It is called
+  after the two others at the same point.
+
+**Forward sensitivities.** For a parameter theta_k, with
+``x_k(t) = dx(t)/dtheta_k``,
+
+    x_k(t+1) = (A + dh_x/dx) x_k(t) + d[A x + B u + h_x]/dtheta_k (direct),
+    y_k(t)   = (C + dh_y/dx) x_k(t) + d[C x + D u + h_y]/dtheta_k (direct),
+
+and ``x_k(start) = e_i`` for the i-th initial-state parameter, else 0. Only
+the columns that move the state (A, B, the terms' parameters of h_x, x0) are
+propagated.
+
+**Divergence.** A sequence diverges at the first sample whose state or output
+is not finite or exceeds :data:`DIVERGENCE_BOUND` in absolute value; its
+outputs and states are NaN from there to its end.
+"""
+
+import numpy as np
+from numba import njit, types
+from numba.experimental.function_type import _get_wrapper_address
+
+#: Largest absolute normalised state or output value a simulation may reach
+#: before it is declared divergent. Normalised signals have unit standard
+#: deviation, so any physically meaningful trajectory stays many orders of
+#: magnitude below it.
+DIVERGENCE_BOUND = 1e6
+
+_F1 = types.float64[::1]
+_F2 = types.float64[:, ::1]
+_F3 = types.float64[:, :, ::1]
+_I1 = types.int64[::1]
+_INT = types.int64
+
+#: Signatures of the three functions every model's terms provide.
+EVALUATE = types.void(_F1, _I1, _F1, _INT, _F1, _F1)
+STATE_JACOBIAN = types.void(_F1, _I1, _F1, _INT, _F2, _F1)
+PARAMETER_JACOBIAN = types.void(_F1, _I1, _F1, _INT, _F1, _F2, _INT, _F2, _INT)
+
+
+class _FunctionPointer(types.WrapperAddressProtocol):
+    """A compiled function passed to the kernels by address.
+
+    Passing the dispatcher itself works too, but numba then resolves it at
+    every call (tens of microseconds, more than a short simulation takes).
+    """
+
+    def __init__(self, function, signature):
+        self._address = _get_wrapper_address(function, signature)
+        self._signature = signature
+
+    def __wrapper_address__(self):
+        return self._address
+
+    def signature(self):
+        return self._signature
+
+
+_POINTERS = {}
+
+
+def function_pointer(function, signature):
+    """The address of a compiled function with an explicit signature, for the kernels."""
+    key = (function, signature)
+    if key not in _POINTERS:
+        _POINTERS[key] = _FunctionPointer(function, signature)
+    return _POINTERS[key]
+
+
+@njit(cache=True)
+def escaped(values, bound):
+    """Whether a value is not finite or exceeds ``bound`` in absolute value."""
+    for i in range(values.shape[0]):
+        if not abs(values[i]) <= bound:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _linear_step(A, B, C, D, x, u, h, x_next, y):
+    """``x_next = A x + B u + h_x`` and ``y = C x + D u + h_y``, in place."""
+    n = A.shape[0]
+    for i in range(n):
+        acc = h[i]
+        for j in range(n):
+            acc += A[i, j] * x[j]
+        for j in range(u.shape[0]):
+            acc += B[i, j] * u[j]
+        x_next[i] = acc
+    for i in range(C.shape[0]):
+        acc = h[n + i]
+        for j in range(n):
+            acc += C[i, j] * x[j]
+        for j in range(u.shape[0]):
+            acc += D[i, j] * u[j]
+        y[i] = acc
+
+
+@njit(cache=True)
+def _linear_part(theta, n, n_u, n_y):
+    """Views of A, B, C, D in ``theta`` and the offset of the terms' parameters."""
+    o_b = n * n
+    o_c = o_b + n * n_u
+    o_d = o_c + n_y * n
+    o_terms = o_d + n_y * n_u
+    A = theta[:o_b].reshape((n, n))
+    B = theta[o_b:o_c].reshape((n, n_u))
+    C = theta[o_c:o_d].reshape((n_y, n))
+    D = theta[o_d:o_terms].reshape((n_y, n_u))
+    return A, B, C, D, o_terms
+
+
+@njit(
+    types.Tuple((_F2, _F2, types.boolean))(
+        _F1, _INT, _INT, _I1, _INT, _F2, _I1, _F2, types.FunctionType(EVALUATE)
+    ),
+    cache=True,
+)
+def simulate(theta, n_outputs, n_terms, spec, work_size, U, starts, x0, evaluate):
+    """Free-run simulation of every sequence.
+
+    Parameters
+    ----------
+    theta : ndarray of shape (n_params,)
+        Parameters (a trailing initial state in it is ignored: ``x0`` is used).
+    n_outputs, n_terms : int
+        Number of outputs and of the terms' parameters.
+    spec : ndarray of int64
+        Structure of the terms.
+    work_size : int
+        Size of the terms' scratch array.
+    U : ndarray of shape (n_samples, n_inputs)
+    starts : ndarray of int64 of shape (n_sequences + 1,)
+    x0 : ndarray of shape (n_sequences, n_states)
+    evaluate : compiled function
+        The terms' ``evaluate``.
+
+    Returns
+    -------
+    Y : ndarray of shape (n_samples, n_outputs)
+    X : ndarray of shape (n_samples, n_states)
+        NaN from the first divergent sample to the end of its sequence.
+    diverged : bool
+    """
+    n = x0.shape[1]
+    n_u = U.shape[1]
+    n_y = n_outputs
+    A, B, C, D, o_terms = _linear_part(theta, n, n_u, n_y)
+    theta_terms = theta[o_terms : o_terms + n_terms]
+    n_samples = U.shape[0]
+    Y = np.empty((n_samples, n_y))
+    X = np.empty((n_samples, n))
+    s = np.empty(n + n_u)
+    h = np.empty(n + n_y)
+    work = np.empty(work_size)
+    x = np.empty(n)
+    x_next = np.empty(n)
+    diverged = False
+    for seq in range(starts.shape[0] - 1):
+        begin, end = starts[seq], starts[seq + 1]
+        x[:] = x0[seq]
+        for t in range(begin, end):
+            failed = escaped(x, DIVERGENCE_BOUND)
+            if not failed:
+                s[:n] = x
+                s[n:] = U[t]
+                evaluate(theta_terms, spec, s, n, h, work)
+                _linear_step(A, B, C, D, x, U[t], h, x_next, Y[t])
+                failed = escaped(Y[t], DIVERGENCE_BOUND)
+            if failed:
+                Y[t:end] = np.nan
+                X[t:end] = np.nan
+                diverged = True
+                break
+            X[t] = x
+            x[:] = x_next
+    return Y, X, diverged
+
+
+@njit(
+    types.Tuple((_F2, _F2, _F3, types.boolean))(
+        _F1, _INT, _INT, _INT, _I1, _INT, _F2, _I1, _F2, types.boolean, _I1,
+        types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
+        types.FunctionType(PARAMETER_JACOBIAN),
+    ),
+    cache=True,
+)
+def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, starts,
+                  x0, estimate_x0, jacobian_rows, evaluate, state_jacobian,
+                  parameter_jacobian):
+    """Simulated outputs and states, and the outputs' Jacobian with respect to theta.
+
+    Parameters are those of :func:`simulate`, plus
+
+    n_state_terms : int
+        Number of the terms' parameters that enter ``h_x``; they come first
+        in ``theta_terms``.
+    estimate_x0 : bool
+        Whether theta ends with the initial state (its sensitivity starts at
+        the identity in every sequence).
+    jacobian_rows : ndarray of int64 of shape (n_samples,)
+        Row of ``J`` receiving the derivatives of sample t, or -1 to skip the
+        sample (e.g. a transient outside the cost): only the rows the cost
+        needs are stored.
+    state_jacobian, parameter_jacobian : compiled functions
+        The terms' other two functions.
+
+    Returns
+    -------
+    Y : ndarray of shape (n_samples, n_outputs)
+    X : ndarray of shape (n_samples, n_states)
+    J : ndarray of shape (max(jacobian_rows) + 1, n_outputs, n_params)
+    diverged : bool
+        When True, ``Y``, ``X`` and ``J`` are incomplete and must not be used.
+    """
+    n = x0.shape[1]
+    n_u = U.shape[1]
+    n_y = n_outputs
+    n_params = theta.shape[0]
+    A, B, C, D, o_terms = _linear_part(theta, n, n_u, n_y)
+    theta_terms = theta[o_terms : o_terms + n_terms]
+    o_b = n * n
+    o_c = o_b + n * n_u
+    o_d = o_c + n_y * n
+    o_x0 = o_terms + n_terms
+    # The state sensitivities hold the columns that move the state, in the
+    # order A, B, the terms' state prefix, x0; their columns in theta:
+    n_x0 = n if estimate_x0 else 0
+    n_moving = o_c + n_state_terms + n_x0
+    columns = np.empty(n_moving, dtype=np.int64)
+    for k in range(o_c):
+        columns[k] = k
+    for k in range(n_state_terms):
+        columns[o_c + k] = o_terms + k
+    for k in range(n_x0):
+        columns[o_c + n_state_terms + k] = o_x0 + k
+
+    n_samples = U.shape[0]
+    Y = np.empty((n_samples, n_y))
+    X = np.empty((n_samples, n))
+    n_rows = 0
+    for t in range(n_samples):
+        n_rows = max(n_rows, jacobian_rows[t] + 1)
+    J = np.zeros((n_rows, n_y, n_params))
+    unused_rows = np.zeros((n_y, n_params))
+    s = np.empty(n + n_u)
+    h = np.empty(n + n_y)
+    work = np.empty(work_size)
+    M = np.empty((n + n_y, n))
+    x = np.empty(n)
+    x_next = np.empty(n)
+    current = np.zeros((n, n_moving))
+    following = np.empty((n, n_moving))
+    for seq in range(starts.shape[0] - 1):
+        x[:] = x0[seq]
+        current[:] = 0.0
+        for i in range(n_x0):
+            current[i, n_moving - n_x0 + i] = 1.0
+        for t in range(starts[seq], starts[seq + 1]):
+            if escaped(x, DIVERGENCE_BOUND):
+                return Y, X, J, True
+            u = U[t]
+            s[:n] = x
+            s[n:] = u
+            evaluate(theta_terms, spec, s, n, h, work)
+            _linear_step(A, B, C, D, x, u, h, x_next, Y[t])
+            if escaped(Y[t], DIVERGENCE_BOUND):
+                return Y, X, J, True
+            X[t] = x
+            state_jacobian(theta_terms, spec, s, n, M, work)
+            # Propagated part and direct dependence of the linear part.
+            for i in range(n):
+                for c in range(n_moving):
+                    acc = 0.0
+                    for j in range(n):
+                        acc += (M[i, j] + A[i, j]) * current[j, c]
+                    following[i, c] = acc
+                for j in range(n):
+                    following[i, i * n + j] += x[j]
+                for j in range(n_u):
+                    following[i, o_b + i * n_u + j] += u[j]
+            row = jacobian_rows[t]
+            if row < 0:
+                parameter_jacobian(theta_terms, spec, s, n, work, following, o_c,
+                                   unused_rows, -1)
+            else:
+                out = J[row]
+                for i in range(n_y):
+                    for c in range(n_moving):
+                        acc = 0.0
+                        for j in range(n):
+                            acc += (M[n + i, j] + C[i, j]) * current[j, c]
+                        out[i, columns[c]] = acc
+                    for j in range(n):
+                        out[i, o_c + i * n + j] += x[j]
+                    for j in range(n_u):
+                        out[i, o_d + i * n_u + j] += u[j]
+                parameter_jacobian(theta_terms, spec, s, n, work, following, o_c, out,
+                                   o_terms)
+            x[:] = x_next
+            current, following = following, current
+    return Y, X, J, False
+
+
+@njit(
+    _F3(_F1, _INT, _INT, _INT, _I1, _INT, _F2, types.FunctionType(EVALUATE),
+        types.FunctionType(STATE_JACOBIAN)),
+    cache=True,
+)
+def local_jacobians(theta, n_states, n_outputs, n_terms, spec, work_size, S, evaluate,
+                    state_jacobian):
+    """Jacobians of ``[x(t+1); y(t)]`` with respect to ``x(t)`` at the points ``S``.
+
+    Parameters
+    ----------
+    theta, n_outputs, n_terms, spec, work_size, evaluate, state_jacobian
+        As in :func:`sensitivities`.
+    n_states : int
+        Number of states.
+    S : ndarray of shape (n_points, n_states + n_inputs)
+        Points ``[x; u]``.
+
+    Returns
+    -------
+    jacobians : ndarray of shape (n_points, n_states + n_outputs, n_states)
+        ``[A; C] + dh/dx`` at every point.
+    """
+    n, n_y = n_states, n_outputs
+    A, B, C, D, o_terms = _linear_part(theta, n, S.shape[1] - n, n_y)
+    theta_terms = theta[o_terms : o_terms + n_terms]
+    h = np.empty(n + n_y)
+    work = np.empty(work_size)
+    out = np.empty((S.shape[0], n + n_y, n))
+    s = np.empty(S.shape[1])
+    for t in range(S.shape[0]):
+        s[:] = S[t]
+        evaluate(theta_terms, spec, s, n, h, work)
+        state_jacobian(theta_terms, spec, s, n, out[t], work)
+        for i in range(n):
+            for j in range(n):
+                out[t, i, j] += A[i, j]
+        for i in range(n_y):
+            for j in range(n):
+                out[t, n + i, j] += C[i, j]
+    return out
+
+
+@njit(
+    _F2(_F1, _INT, _INT, _INT, _INT, _I1, _INT, _F2, _F3, types.float64,
+        types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
+        types.FunctionType(PARAMETER_JACOBIAN)),
+    cache=True,
+)
+def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, spec,
+                          work_size, S, G, step, evaluate, state_jacobian,
+                          parameter_jacobian):
+    """``sum_ij G[t, i, j] d^2 h_x,i / dx_j dtheta_k`` at the points ``S``.
+
+    The derivative of ``sum_ij G_ij (dh_x/dx)_ij`` with respect to the terms'
+    parameters that enter ``h_x``, by central differences in the states of
+    the terms' parameter Jacobian (2 n evaluations per point, whatever the
+    number of parameters).
+
+    Parameters
+    ----------
+    theta, n_outputs, n_terms, n_state_terms, spec, work_size
+        As in :func:`sensitivities`.
+    n_states : int
+    S : ndarray of shape (n_points, n_states + n_inputs)
+        Points ``[x; u]``.
+    G : ndarray of shape (n_points, n_states, n_states)
+        Weights of the entries of ``dh_x/dx``.
+    step : float
+        Difference step in the states.
+    evaluate, state_jacobian, parameter_jacobian : compiled functions
+        The terms' functions.
+
+    Returns
+    -------
+    contraction : ndarray of shape (n_points, n_state_terms)
+    """
+    n, n_y = n_states, n_outputs
+    o_terms = _linear_part(theta, n, S.shape[1] - n, n_y)[4]
+    theta_terms = theta[o_terms : o_terms + n_terms]
+    h = np.empty(n + n_y)
+    dh_dx = np.empty((n + n_y, n))
+    work = np.empty(work_size)
+    upper = np.empty((n, n_state_terms))
+    lower = np.empty((n, n_state_terms))
+    unused = np.empty((n_y, 1))
+    s = np.empty(S.shape[1])
+    out = np.zeros((S.shape[0], n_state_terms))
+    for t in range(S.shape[0]):
+        for j in range(n):
+            for sign, target in ((1.0, upper), (-1.0, lower)):
+                s[:] = S[t]
+                s[j] += sign * step
+                target[:] = 0.0
+                evaluate(theta_terms, spec, s, n, h, work)
+                state_jacobian(theta_terms, spec, s, n, dh_dx, work)
+                parameter_jacobian(theta_terms, spec, s, n, work, target, 0, unused, -1)
+            for i in range(n):
+                weight = G[t, i, j] / (2.0 * step)
+                for k in range(n_state_terms):
+                    out[t, k] += weight * (upper[i, k] - lower[i, k])
+    return out
+
+
+# ---------------------------------------------------------------- no terms
+@njit(EVALUATE, cache=True)
+def no_terms_evaluate(theta_terms, spec, s, n_states, h, work):
+    """Terms of a linear model: zero."""
+    h[:] = 0.0
+
+
+@njit(STATE_JACOBIAN, cache=True)
+def no_terms_state_jacobian(theta_terms, spec, s, n_states, dh_dx, work):
+    """State derivatives of the zero terms."""
+    dh_dx[:] = 0.0
+
+
+@njit(PARAMETER_JACOBIAN, cache=True)
+def no_terms_parameter_jacobian(theta_terms, spec, s, n_states, work, state_out,
+                                state_offset, output_out, output_offset):
+    """The zero terms have no parameters."""

@@ -1,0 +1,187 @@
+"""Parameter layout of a state-space model and its calls into the kernels.
+
+A :class:`StateSpaceModel` joins the linear part shared by every model with a
+*terms* object that describes the model's nonlinear terms ``h = [h_x; h_y]``
+(see :mod:`sknlss._core._kernels` for the contract). The layout of the
+parameter vector is defined here once, for the kernels and for Python:
+
+    theta = [vec(A), vec(B), vec(C), vec(D), theta_terms, x0 (if estimated)]
+"""
+
+import numpy as np
+
+from . import _kernels
+
+
+def _array(values, dtype=np.float64):
+    """C-contiguous and writable, as the compiled signatures require (a read-only
+    array, e.g. from a memory map, is copied)."""
+    return np.require(values, dtype=dtype, requirements=["C", "W"])
+
+
+def _contiguous(U, starts):
+    return _array(U), _array(starts, np.int64)
+
+
+class Terms:
+    """Nonlinear terms of a model: their parameter blocks and compiled functions.
+
+    Subclasses set ``blocks`` (list of ``(name, shape)`` of the terms'
+    parameter blocks, in the order of ``theta_terms``), ``spec`` (int64
+    structure array read by the compiled functions), ``work_size`` and the
+    three compiled functions ``evaluate``, ``state_jacobian`` and
+    ``parameter_jacobian``, and ``n_state_params``: the number of the
+    terms' parameters that enter ``h_x`` (they come first in ``theta_terms``).
+    """
+
+    blocks = ()
+    spec = np.zeros(1, dtype=np.int64)
+    work_size = 0
+    n_state_params = 0
+    evaluate = staticmethod(_kernels.no_terms_evaluate)
+    state_jacobian = staticmethod(_kernels.no_terms_state_jacobian)
+    parameter_jacobian = staticmethod(_kernels.no_terms_parameter_jacobian)
+
+    @property
+    def n_params(self):
+        """Number of parameters of the terms."""
+        return int(sum(np.prod(shape, dtype=np.int64) for _, shape in self.blocks))
+
+    def decay_scale(self, theta_terms, S):
+        """Scale of the weight decay of each parameter (0: not decayed).
+
+        ``S`` holds the points ``[x; u]`` of the fitted samples along the
+        initial model's trajectory.
+        """
+        return np.zeros(self.n_params)
+
+
+def _pointers(terms):
+    """The terms' compiled functions, by address."""
+    return (_kernels.function_pointer(terms.evaluate, _kernels.EVALUATE),
+            _kernels.function_pointer(terms.state_jacobian, _kernels.STATE_JACOBIAN),
+            _kernels.function_pointer(terms.parameter_jacobian,
+                                      _kernels.PARAMETER_JACOBIAN))
+
+
+class StateSpaceModel:
+    """Linear part plus nonlinear terms, with the parameter layout.
+
+    Parameters
+    ----------
+    n_states, n_inputs, n_outputs : int
+        Dimensions.
+    terms : Terms, default=None
+        The nonlinear terms; ``None`` for a linear model.
+    estimate_x0 : bool, default=False
+        Whether the initial state (shared by all sequences) ends the
+        parameter vector.
+    """
+
+    def __init__(self, n_states, n_inputs, n_outputs, terms=None, *, estimate_x0=False):
+        self.n_states, self.n_inputs, self.n_outputs = n_states, n_inputs, n_outputs
+        self.terms = Terms() if terms is None else terms
+        self.estimate_x0 = bool(estimate_x0)
+        n, n_u, n_y = n_states, n_inputs, n_outputs
+        self.blocks = [("A", (n, n)), ("B", (n, n_u)), ("C", (n_y, n)), ("D", (n_y, n_u))]
+        self.blocks += list(self.terms.blocks)
+        if self.estimate_x0:
+            self.blocks.append(("x0", (n,)))
+        sizes = [int(np.prod(shape, dtype=np.int64)) for _, shape in self.blocks]
+        self.offsets = dict(zip((name for name, _ in self.blocks), np.cumsum([0] + sizes)))
+        self.n_params = int(sum(sizes))
+        self.n_linear = n * n + n * n_u + n_y * n + n_y * n_u
+        self.n_terms = self.terms.n_params
+
+    # ---------------------------------------------------------------- layout
+    def columns(self, *names):
+        """Indices in theta of the named blocks (absent names are skipped)."""
+        index = []
+        for name, shape in self.blocks:
+            if name in names:
+                begin = self.offsets[name]
+                index.append(np.arange(begin, begin + int(np.prod(shape, dtype=np.int64))))
+        return np.concatenate(index) if index else np.zeros(0, dtype=np.int64)
+
+    @property
+    def linear_columns(self):
+        """Indices of A, B, C, D and x0."""
+        return self.columns("A", "B", "C", "D", "x0")
+
+    @property
+    def terms_columns(self):
+        """Indices of the terms' parameters."""
+        return np.arange(self.n_linear, self.n_linear + self.n_terms)
+
+    def pack(self, values):
+        """Parameter vector from a dict of arrays keyed by block name."""
+        return np.concatenate(
+            [np.asarray(values[name], dtype=np.float64).reshape(-1) for name, _ in self.blocks]
+        )
+
+    def unpack(self, theta):
+        """Dict of arrays (copies) keyed by block name."""
+        return {
+            name: np.array(theta[self.offsets[name] : self.offsets[name]
+                                 + int(np.prod(shape, dtype=np.int64))]).reshape(shape)
+            for name, shape in self.blocks
+        }
+
+    # ------------------------------------------------------------ simulation
+    def initial_states(self, theta, n_sequences, x0=None):
+        """Initial state of every sequence: ``x0`` if given, else the estimated
+        one in theta, else zero."""
+        if x0 is None:
+            if self.estimate_x0:
+                x0 = theta[self.offsets["x0"] :]
+            else:
+                x0 = np.zeros(self.n_states)
+        x0 = np.asarray(x0, dtype=np.float64)
+        return np.array(np.broadcast_to(x0, (n_sequences, self.n_states)), dtype=np.float64,
+                        order="C")
+
+    def simulate(self, theta, U, starts, x0=None):
+        """Free-run simulation: outputs, states and the divergence flag.
+
+        See :func:`sknlss._core._kernels.simulate`; ``x0`` defaults to
+        :meth:`initial_states`.
+        """
+        terms = self.terms
+        return _kernels.simulate(
+            _array(theta), self.n_outputs, self.n_terms,
+            _array(terms.spec, np.int64), terms.work_size, *_contiguous(U, starts),
+            self.initial_states(theta, len(starts) - 1, x0), _pointers(terms)[0],
+        )
+
+    def sensitivities(self, theta, U, starts, jacobian_rows, x0=None):
+        """Outputs, states, the outputs' Jacobian on ``jacobian_rows`` and the
+        divergence flag (see :func:`sknlss._core._kernels.sensitivities`)."""
+        terms = self.terms
+        return _kernels.sensitivities(
+            _array(theta), self.n_outputs, self.n_terms,
+            terms.n_state_params, _array(terms.spec, np.int64), terms.work_size, *_contiguous(U, starts),
+            self.initial_states(theta, len(starts) - 1, x0), self.estimate_x0,
+            _array(jacobian_rows, np.int64), *_pointers(terms),
+        )
+
+    def local_jacobians(self, theta, S):
+        """``[A; C] + dh/dx`` at the points ``S = [x; u]``, shape
+        (n_points, n_states + n_outputs, n_states)."""
+        terms = self.terms
+        return _kernels.local_jacobians(
+            _array(theta), self.n_states, self.n_outputs,
+            self.n_terms, _array(terms.spec, np.int64), terms.work_size,
+            _array(S), *_pointers(terms)[:2],
+        )
+
+    def curvature_contraction(self, theta, S, G, step):
+        """``sum_ij G[t, i, j] d^2 h_x,i / dx_j dtheta_k`` for the terms' parameters
+        of h_x, at the points ``S`` (see
+        :func:`sknlss._core._kernels.curvature_contraction`)."""
+        terms = self.terms
+        return _kernels.curvature_contraction(
+            _array(theta), self.n_states, self.n_outputs,
+            self.n_terms, terms.n_state_params, _array(terms.spec, np.int64), terms.work_size,
+            _array(S),
+            _array(G), float(step), *_pointers(terms),
+        )

@@ -1,0 +1,85 @@
+"""Several starts of one fit, run in parallel and ranked on their held-out loss."""
+
+import numpy as np
+from sklearn.utils.parallel import Parallel, delayed
+
+from ._optimize import levenberg_marquardt
+
+# What a start may raise and still leave the others standing: a starting
+# point from which a simulation or a factorisation fails numerically.
+_START_ERRORS = (ValueError, FloatingPointError, np.linalg.LinAlgError)
+
+
+def _guarded(fit_one, *args):
+    try:
+        return fit_one(*args)
+    except _START_ERRORS as error:
+        return error
+
+
+def run_starts(fit_one, starts, n_jobs=None):
+    """Run ``fit_one(*start)`` for every start and rank the outcomes.
+
+    Parameters
+    ----------
+    fit_one : callable
+        Returns a tuple whose second item is an
+        :class:`~sknlss._core._optimize.LMResult`.
+    starts : list of tuple
+        Arguments of each start.
+    n_jobs : int, default=None
+        Joblib workers.
+
+    Returns
+    -------
+    outcomes : list
+        The return value of every start, or the exception it raised.
+    best : int or None
+        Index of the start with the lowest selection loss (held-out loss, or
+        cost without hold-out; the first of equals); None when every start
+        raised.
+    """
+    outcomes = Parallel(n_jobs=n_jobs)(delayed(_guarded)(fit_one, *start)
+                                       for start in starts)
+    ranked = [(outcome[1].selection_loss, i) for i, outcome in enumerate(outcomes)
+              if not isinstance(outcome, Exception)]
+    return outcomes, (min(ranked)[1] if ranked else None)
+
+
+def _finite(r, J):
+    return r is not None and np.all(np.isfinite(r)) and np.all(np.isfinite(J))
+
+
+def fit_from(problem, candidates, *, label, **options):
+    """Levenberg-Marquardt on ``problem`` from the first candidate that simulates.
+
+    Parameters
+    ----------
+    problem : SimulationErrorProblem
+    candidates : iterable of ndarray
+        Starting points, tried in turn until one gives a finite residual and
+        Jacobian (e.g. a model, then the same with its nonlinear terms
+        shrunk).
+    label : str
+        Prefix of the progress lines and warnings.
+    **options
+        Passed to :func:`~sknlss._core._optimize.levenberg_marquardt`.
+
+    Returns
+    -------
+    theta : ndarray
+        The selected parameters.
+    result : LMResult
+    """
+    for theta0 in candidates:
+        initial = problem.residual(theta0, True)
+        if _finite(*initial):
+            break
+    else:
+        raise ValueError(
+            f"{label}: no starting point can be simulated on the estimation data."
+        )
+    result = levenberg_marquardt(problem.residual, theta0,
+                                 validation_loss=problem.validation_loss, label=label,
+                                 initial=initial, **options)
+    return result.theta, result

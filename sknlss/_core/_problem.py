@@ -1,0 +1,356 @@
+"""The simulation-error least-squares problem shared by every nonlinear model.
+
+:class:`SimulationErrorProblem` turns a parameter vector of a
+:class:`~sknlss._core._model.StateSpaceModel` into residuals and their
+Jacobian in the form :func:`~sknlss._core._optimize.levenberg_marquardt`
+expects, and into the held-out (validation) loss. Its options hold for every
+model:
+
+- the cost: the time-domain simulation error on the fitted rows, or for
+  periodic data its per-period DFT weighted by the inverse noise level (paper
+  eq. 17);
+- the transient: dropped from the cost, or, for periodic data, replaced by the
+  last samples of every sequence prepended to it (steady state);
+- the initial state, estimated (it ends theta) or fixed;
+- a stability penalty on the local linearisation along the fitted trajectory;
+- a weight decay on the nonlinear terms;
+- the restriction to a subset of the parameters (e.g. the linear part first).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._sequences import holdout_masks, period_blocks, steady_state_rows
+
+
+@dataclass
+class FitRows:
+    """The rows a fit simulates, and which of them enter the cost and the hold-out.
+
+    Attributes
+    ----------
+    U, Y : ndarray of shape (n_rows, n_inputs), (n_rows, n_outputs)
+        The simulated rows (with the prepended steady-state samples, if any).
+    starts : ndarray of shape (n_sequences + 1,)
+        Boundaries of the simulated sequences.
+    fit_rows, val_rows : ndarray of bool of shape (n_rows,)
+        Rows of the cost and of the held-out loss.
+    original : ndarray of bool of shape (n_rows,)
+        Rows that are samples of the data (not prepended ones).
+    """
+
+    U: np.ndarray
+    Y: np.ndarray
+    starts: np.ndarray
+    fit_rows: np.ndarray
+    val_rows: np.ndarray
+    original: np.ndarray
+
+
+def fit_rows(U, Y, starts, *, n_transient, validation_fraction, steady_state_period=None):
+    """The rows of a fit: cost, hold-out, and the transient handling.
+
+    Parameters
+    ----------
+    U, Y : ndarray
+        Normalised signals.
+    starts : ndarray
+        Sequence boundaries.
+    n_transient : int
+        Samples per sequence kept out of the cost. With
+        ``steady_state_period``, the last ``n_transient`` samples of every
+        sequence are prepended to it instead, so that it starts in (nearly)
+        periodic steady state and all its samples enter the cost.
+    validation_fraction : float
+        Share of the end of every sequence held out.
+    steady_state_period : int, default=None
+        Period of a periodic excitation (every sequence a whole number of
+        periods); None for a transient cut from the records.
+
+    Returns
+    -------
+    rows : FitRows
+    """
+    periodic = steady_state_period is not None and n_transient > 0
+    fit_mask, val_mask = holdout_masks(starts, 0 if periodic else n_transient,
+                                       validation_fraction)
+    if not periodic:
+        return FitRows(U, Y, starts, fit_mask, val_mask, np.ones(len(U), dtype=bool))
+    index, sim_starts, original = steady_state_rows(starts, n_transient)
+    fit_sim = np.zeros(len(index), dtype=bool)
+    val_sim = np.zeros(len(index), dtype=bool)
+    fit_sim[original], val_sim[original] = fit_mask, val_mask
+    return FitRows(np.ascontiguousarray(U[index]), np.ascontiguousarray(Y[index]),
+                   sim_starts, fit_sim, val_sim, original)
+
+
+# ------------------------------------------------------------ frequency cost
+def _output_noise_weights(Y, blocks, period):
+    """Inverse noise standard deviation per DFT line and output.
+
+    The noise variance of the per-period DFT of the output is estimated from its
+    variation over the periods of each sequence (pooled over the sequences that
+    have at least two periods). Returns ones when no sequence has two periods.
+    """
+    n_outputs = Y.shape[1]
+    total = np.zeros((period // 2 + 1, n_outputs))
+    dof = 0
+    for begin, n_periods in blocks:
+        if n_periods < 2:
+            continue
+        spectra = np.fft.rfft(
+            Y[begin : begin + n_periods * period].reshape(n_periods, period, n_outputs),
+            axis=1,
+        )
+        total += np.sum(np.abs(spectra - spectra.mean(axis=0)) ** 2, axis=0) / period
+        dof += n_periods - 1
+    if dof == 0:
+        return np.ones_like(total)
+    variance = total / dof
+    peak = variance.max(axis=0)
+    # A line whose variance is numerically zero (noiseless data) must not get
+    # an infinite weight: floor it far below the typical noise level.
+    floor = np.where(peak > 0, 1e-10 * peak, 1.0)
+    return 1.0 / np.sqrt(np.maximum(variance, floor))
+
+
+def _frequency_rows(values, blocks, period, weights):
+    """Weighted per-period DFT of time-domain rows, stacked as real and imaginary parts.
+
+    ``values`` has shape (n_samples, n_outputs, ...) (residuals, or Jacobian rows
+    with a trailing parameter axis); the DFT is taken over the samples of each
+    period, scaled by ``1 / sqrt(period)`` so that the cost keeps the size of the
+    time-domain cost.
+    """
+    parts = []
+    extra = (1,) * (values.ndim - 2)
+    w = weights.reshape(weights.shape + extra)
+    for begin, n_periods in blocks:
+        block = values[begin : begin + n_periods * period]
+        spectra = np.fft.rfft(block.reshape((n_periods, period) + values.shape[1:]), axis=1)
+        spectra *= w / np.sqrt(period)
+        parts.append(spectra.real.reshape((-1,) + values.shape[2:]))
+        parts.append(spectra.imag.reshape((-1,) + values.shape[2:]))
+    return np.concatenate(parts)
+
+
+# --------------------------------------------------------- stability penalty
+def spectral_radius(J):
+    """Spectral radius of each matrix of ``J`` and its derivative.
+
+    Parameters
+    ----------
+    J : ndarray of shape (n_points, n, n)
+
+    Returns
+    -------
+    radius : ndarray of shape (n_points,)
+    gradient : ndarray of shape (n_points, n, n)
+        Derivative of the radius with respect to the entries of each matrix,
+        from the eigenvector formula ``d lambda = w^H dJ v / (w^H v)`` for the
+        eigenvalue of largest modulus.
+    """
+    eigenvalues, right = np.linalg.eig(J)
+    rows = np.arange(len(J))
+    top = np.argmax(np.abs(eigenvalues), axis=1)
+    largest = eigenvalues[rows, top]
+    radius = np.abs(largest)
+    # Rows of the inverse of the right eigenvectors are the left eigenvectors
+    # normalised so that w^H v = 1.
+    left = np.linalg.inv(right)[rows, top]
+    phase = np.conj(largest) / np.maximum(radius, np.finfo(float).tiny)
+    gradient = np.real(phase[:, None, None] * left[:, :, None] * right[rows, :, top][:, None, :])
+    return radius, gradient
+
+
+# Step in the (normalised) states of the central differences that give the
+# penalty's dependence on the terms' parameters (the penalty's Jacobian is a
+# Gauss-Newton approximation in any case: the states' own dependence is left
+# out).
+_PENALTY_STEP = 1e-5
+
+
+class SimulationErrorProblem:
+    """Simulation-error least squares of a state-space model on given rows.
+
+    Parameters
+    ----------
+    model : StateSpaceModel
+        Model structure and parameter layout.
+    rows : FitRows
+        The simulated rows, with the cost and hold-out masks.
+    frequency_period : int, default=None
+        When set, the cost is the weighted per-period DFT of the simulation
+        error (every sequence's cost rows a whole number of periods); the noise
+        weights come from the variation over the periods.
+    stability_penalty : float, default=0.0
+        Weight of the mean squared excess over 1 of the spectral radius of the
+        state map's local Jacobian ``A + dh_x/dx`` at the fitted samples,
+        relative to the mean squared residual.
+    weight_decay : float, default=0.0
+        Weight of the squared size of the terms' parameters (scaled by
+        ``model.terms.decay_scale`` along the initial trajectory, see
+        :meth:`set_decay_scale`), relative to the mean squared residual.
+    x0 : ndarray of shape (n_states,), default=None
+        Initial state of every sequence when the model does not estimate it
+        (zero when None).
+    """
+
+    def __init__(self, model, rows, *, frequency_period=None, stability_penalty=0.0,
+                 weight_decay=0.0, x0=None):
+        self.model = model
+        self.rows = rows
+        self.U, self.Y, self.starts = rows.U, rows.Y, rows.starts
+        self.fit_rows, self.val_rows = rows.fit_rows, rows.val_rows
+        self.period = frequency_period
+        self.stability_penalty = stability_penalty
+        self.weight_decay = weight_decay
+        self.x0 = None if model.estimate_x0 else x0
+        # The Jacobian holds the cost rows only, in order.
+        self.jacobian_rows = np.where(self.fit_rows, np.cumsum(self.fit_rows) - 1,
+                                      -1).astype(np.int64)
+        Y_fit = self.Y[self.fit_rows]
+        if frequency_period is None:
+            self.target = Y_fit.ravel()
+        else:
+            # Periods of every sequence's cost rows, as offsets into those rows.
+            self.blocks = [
+                (int(self.jacobian_rows[begin]), n_periods)
+                for begin, n_periods in period_blocks(self.fit_rows, self.starts,
+                                                      frequency_period)
+            ]
+            self.weights = _output_noise_weights(Y_fit, self.blocks, frequency_period)
+            self.target = _frequency_rows(Y_fit, self.blocks, frequency_period,
+                                          self.weights).ravel()
+        self.validation_loss = self._validation_loss if self.val_rows.any() else None
+        self.decay_scale = None
+
+    # ----------------------------------------------------------- simulation
+    def simulate(self, theta):
+        """Outputs, states and the divergence flag over the simulated rows."""
+        return self.model.simulate(theta, self.U, self.starts, self.x0)
+
+    def _fitted_points(self, X):
+        """``[x; u]`` at the cost rows, from the simulated states X."""
+        return np.hstack([X, self.U])[self.fit_rows]
+
+    def set_decay_scale(self, theta):
+        """Fix the scale of the weight decay from the trajectory of ``theta``
+        (the initial model)."""
+        points = self._fitted_points(self.simulate(theta)[1])
+        scale = self.model.terms.decay_scale(theta[self.model.terms_columns], points)
+        self.decay_scale = np.nan_to_num(scale)
+
+    # ------------------------------------------------------------- residual
+    def residual(self, theta, jacobian):
+        """Residual vector and (when ``jacobian``) its Jacobian; ``(None, None)``
+        when the simulation diverges."""
+        model = self.model
+        if jacobian:
+            Y_model, X, J, diverged = model.sensitivities(
+                theta, self.U, self.starts, self.jacobian_rows, self.x0)
+        else:
+            Y_model, X, diverged = self.simulate(theta)
+            J = None
+        if diverged:
+            return None, None
+        Y_fit = Y_model[self.fit_rows]
+        if self.period is None:
+            r = Y_fit.ravel() - self.target
+        else:
+            r = _frequency_rows(Y_fit, self.blocks, self.period, self.weights).ravel()
+            r -= self.target
+            if jacobian:
+                J = _frequency_rows(J, self.blocks, self.period, self.weights)
+        if jacobian:
+            J = J.reshape(r.size, -1)
+        extra = []
+        if self.stability_penalty:
+            extra.append(self._stability_rows(theta, X, r.size, jacobian))
+        if self.weight_decay:
+            extra.append(self._decay_rows(theta, r.size, jacobian))
+        if extra:
+            r = np.concatenate([r] + [rows for rows, _ in extra])
+            if jacobian:
+                J = np.vstack([J] + [rows for _, rows in extra])
+        return r, J
+
+    def _stability_rows(self, theta, X, n_residuals, jacobian):
+        """Rows of the stability penalty and their Jacobian.
+
+        The rows are the excess over 1 of the local spectral radius of the
+        state map along the fitted trajectory. Their Jacobian holds the direct
+        dependence on A and on the terms' parameters (by central differences
+        in the states of the terms' parameter Jacobian, at the points where
+        the radius exceeds 1 only: elsewhere the rows are flat); the states' own dependence on the
+        parameters is neglected (a Gauss-Newton-type approximation: the cost
+        itself is exact, so every accepted step still lowers it).
+        """
+        model = self.model
+        n = model.n_states
+        S = self._fitted_points(X)
+        radius, gradient = spectral_radius(model.local_jacobians(theta, S)[:, :n])
+        excess = np.maximum(radius - 1.0, 0.0)
+        weight = np.sqrt(self.stability_penalty * n_residuals / len(S))
+        rows = weight * excess
+        if not jacobian:
+            return rows, None
+        J = np.zeros((len(S), theta.size))
+        active = np.flatnonzero(excess > 0)
+        if active.size:
+            G = weight * gradient[active]
+            J[active, : n * n] = G.reshape(active.size, -1)
+            terms_state = model.terms_columns[: model.terms.n_state_params]
+            J[np.ix_(active, terms_state)] = model.curvature_contraction(
+                theta, S[active], G, _PENALTY_STEP)
+        return rows, J
+
+    def _decay_rows(self, theta, n_residuals, jacobian):
+        """Rows of the weight decay (scaled terms' parameters) and their Jacobian."""
+        if self.decay_scale is None:
+            self.set_decay_scale(theta)
+        decayed = np.flatnonzero(self.decay_scale)
+        columns = self.model.terms_columns[decayed]
+        weight = np.sqrt(self.weight_decay * n_residuals) * self.decay_scale[decayed]
+        rows = weight * theta[columns]
+        if not jacobian:
+            return rows, None
+        J = np.zeros((decayed.size, theta.size))
+        J[np.arange(decayed.size), columns] = weight
+        return rows, J
+
+    def restricted(self, theta, free):
+        """The problem in the parameters ``free`` only, the others fixed at ``theta``.
+
+        Returns an object with the ``residual`` and ``validation_loss`` of the
+        free parameters.
+        """
+        return _Restricted(self, theta, free)
+
+    def _validation_loss(self, theta):
+        Y_model, _, diverged = self.simulate(theta)
+        if diverged:
+            return np.inf
+        return float(np.mean((Y_model[self.val_rows] - self.Y[self.val_rows]) ** 2))
+
+
+class _Restricted:
+    """A problem in a subset of its parameters (see ``SimulationErrorProblem.restricted``)."""
+
+    def __init__(self, problem, theta, free):
+        self._problem, self._base, self._free = problem, theta.copy(), free
+        self.validation_loss = (None if problem.validation_loss is None
+                                else self._validation_loss)
+
+    def _full(self, phi):
+        full = self._base.copy()
+        full[self._free] = phi
+        return full
+
+    def residual(self, phi, jacobian):
+        r, J = self._problem.residual(self._full(phi), jacobian)
+        return r, (J[:, self._free] if J is not None else None)
+
+    def _validation_loss(self, phi):
+        return self._problem.validation_loss(self._full(phi))

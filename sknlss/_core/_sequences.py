@@ -1,0 +1,153 @@
+"""Sequences of samples: boundaries, transients, held-out tails and periods.
+
+Several experiments (records, realizations) are concatenated rows; the
+``starts`` array of length ``n_sequences + 1`` holds their boundaries:
+sequence ``k`` occupies rows ``starts[k]:starts[k + 1]``.
+"""
+
+import numpy as np
+
+
+def sequence_bounds(sequence_id, n_samples):
+    """Return the row boundaries of the sequences.
+
+    Parameters
+    ----------
+    sequence_id : array-like of shape (n_samples,) or None
+        Integer label of the experiment each row belongs to. Each label must
+        occupy one contiguous block of rows. ``None`` means a single sequence.
+    n_samples : int
+        Number of rows of ``X``.
+
+    Returns
+    -------
+    starts : ndarray of shape (n_sequences + 1,)
+        Sequence ``k`` occupies rows ``starts[k]:starts[k + 1]``.
+    """
+    if sequence_id is None:
+        return np.array([0, n_samples], dtype=np.int64)
+    ids = np.asarray(sequence_id)
+    if ids.ndim != 1 or ids.shape[0] != n_samples:
+        raise ValueError(
+            f"sequence_id must be a 1-D array with one label per sample: got shape "
+            f"{ids.shape} for X with {n_samples} samples."
+        )
+    if ids.dtype.kind not in "iub":
+        if ids.dtype.kind == "f" and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)):
+            ids = ids.astype(np.int64)
+        else:
+            raise ValueError(
+                f"sequence_id must hold integer labels, got dtype {ids.dtype}."
+            )
+    change = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+    starts = np.concatenate(([0], change, [n_samples])).astype(np.int64)
+    run_labels = ids[starts[:-1]]
+    labels, counts = np.unique(run_labels, return_counts=True)
+    if np.any(counts > 1):
+        raise ValueError(
+            "sequence_id must label each sequence by one contiguous block of rows; "
+            f"label(s) {labels[counts > 1].tolist()} occur in separate blocks."
+        )
+    return starts
+
+
+def transient_mask(starts, n_transient):
+    """Boolean mask of the rows kept once ``n_transient`` samples per sequence are dropped."""
+    mask = np.ones(starts[-1], dtype=bool)
+    for begin, end in zip(starts[:-1], starts[1:]):
+        mask[begin : min(begin + n_transient, end)] = False
+    return mask
+
+
+def holdout_masks(starts, n_transient, validation_fraction):
+    """Rows used for the cost and rows held out for selection.
+
+    The last ``validation_fraction`` of every sequence is held out; the first
+    ``n_transient`` samples of every sequence are in neither set. Simulations run
+    over whole sequences, so the held-out tail continues from the state the
+    model reached at the end of the fitted part.
+
+    Returns
+    -------
+    fit_mask, validation_mask : ndarray of bool of shape (n_samples,)
+    """
+    fit_mask = transient_mask(starts, n_transient)
+    validation_mask = np.zeros_like(fit_mask)
+    if validation_fraction:
+        for begin, end in zip(starts[:-1], starts[1:]):
+            split = end - int(round(validation_fraction * (end - begin)))
+            validation_mask[max(split, begin + n_transient) : end] = True
+            fit_mask[split:end] = False
+    if not fit_mask.any():
+        raise ValueError(
+            f"n_transient={n_transient} and validation_fraction={validation_fraction} "
+            "leave no sample to fit."
+        )
+    return fit_mask, validation_mask
+
+
+def part_before_holdout(U, Y, starts, fit_mask):
+    """Each sequence from its start to its last fitted row, concatenated.
+
+    With masks from :func:`holdout_masks`, these are the sequences cut before
+    their held-out tails (their transients kept): the initialisations of the
+    nonlinear models see only these rows, so the tails stay unseen until the
+    iterate selection.
+
+    Returns
+    -------
+    U_part, Y_part : ndarray
+        The kept rows, C-contiguous.
+    starts_part : ndarray of shape (n_kept_sequences + 1,)
+        Boundaries of the kept parts; sequences without a fitted row are dropped.
+    """
+    segments = []
+    for begin, end in zip(starts[:-1], starts[1:]):
+        fitted = np.flatnonzero(fit_mask[begin:end])
+        if fitted.size:
+            segments.append((begin, begin + fitted[-1] + 1))
+    rows = np.concatenate([np.arange(begin, end) for begin, end in segments])
+    lengths = [end - begin for begin, end in segments]
+    starts_part = np.cumsum([0] + lengths).astype(np.int64)
+    return np.ascontiguousarray(U[rows]), np.ascontiguousarray(Y[rows]), starts_part
+
+
+def steady_state_rows(starts, n_prepend):
+    """Row indices of the sequences, each preceded by its last ``n_prepend`` samples.
+
+    Simulating a periodic signal from this extension starts every sequence in
+    (approximately) steady state. Returns the row index into the original
+    arrays per extended row, the extended ``starts`` and a mask of the extended
+    rows that are original samples.
+    """
+    index, original, new_starts = [], [], [0]
+    for begin, end in zip(starts[:-1], starts[1:]):
+        length = end - begin
+        head = begin + (np.arange(length - n_prepend, length) % length)
+        index.append(head)
+        index.append(np.arange(begin, end))
+        original.append(np.zeros(n_prepend, dtype=bool))
+        original.append(np.ones(length, dtype=bool))
+        new_starts.append(new_starts[-1] + n_prepend + length)
+    return (
+        np.concatenate(index).astype(np.int64),
+        np.asarray(new_starts, dtype=np.int64),
+        np.concatenate(original),
+    )
+
+
+def period_blocks(mask, starts, period):
+    """(begin, n_periods) of the masked block of each sequence, in whole periods."""
+    blocks = []
+    for begin, end in zip(starts[:-1], starts[1:]):
+        rows = np.flatnonzero(mask[begin:end])
+        if rows.size == 0:
+            continue
+        if rows.size % period or rows[-1] - rows[0] + 1 != rows.size:
+            raise ValueError(
+                f"cost='frequency' needs the fitted rows of every sequence to be a "
+                f"whole number of periods (period={period}); got {rows.size} "
+                "rows. Adjust validation_fraction or the record lengths."
+            )
+        blocks.append((begin + rows[0], rows.size // period))
+    return blocks

@@ -1,0 +1,337 @@
+"""Nonlinear linear-fractional (NL-LFR) state-space models.
+
+A linear state-space model with a static nonlinearity in feedback:
+
+    x(t+1) = A x + B u + Bw w,   y(t) = C x + D u + Dw w,
+    z(t) = Cz x + Dz u,          w_l(t) = f_l(z_l(t)),
+
+each ``f_l`` a combination of the functions of a univariate basis. The model
+covers Wiener-Hammerstein chains and Duffing-type oscillators with a few dozen
+parameters, and its nonlinearity is explicit, which makes it extrapolate
+better than a full multivariate polynomial.
+
+The initialisation needs no nonlinear simulation: along the trajectory of the
+Best Linear Approximation, the branch inputs ``z`` are fixed (the first branches
+along the outputs, the others in random directions), and the contribution of
+``w = f(z)`` to the output is linear in the products ``[Bw; Dw] c_l^T`` of the
+output directions and the basis coefficients, each basis function entering
+through the linear dynamics. These products follow by linear least squares,
+and their best rank-one factors give ``Bw``, ``Dw`` and the coefficients.
+Levenberg-Marquardt then minimises the simulation error over all parameters.
+"""
+
+from numbers import Integral
+
+import numpy as np
+from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import HasMethods, Interval
+
+from .._core._model import StateSpaceModel
+from .._terms._bases import PolynomialBasis
+from .._terms._branches import BranchTerms
+from ._nonlinear import _BaseNonlinearStateSpace
+
+# Relative ridge of the least squares of the initialisation: it only keeps
+# the regression defined when basis functions are nearly collinear.
+_RIDGE = 1e-8
+
+
+def _branch_inputs(V, S, rows):
+    """Branch inputs ``S @ V`` with each direction scaled so that ``|z| <= 1``
+    on ``rows``."""
+    Z = S @ V
+    peak = np.max(np.abs(Z[rows]), axis=0)
+    V = V / np.where(peak > 0, peak, 1.0)
+    return V, S @ V
+
+
+def _least_squares_terms(problem, theta, V):
+    """Output directions W and basis coefficients for fixed branch directions V.
+
+    Along the linear model's trajectory (parameters ``theta``), basis function
+    ``m`` of branch ``l`` enters state ``i`` through the linear dynamics and
+    output ``j`` directly; the output error of the linear model is regressed
+    on these responses, and each branch's block of products ``W[:, l] c[l]``
+    is factored by its best rank-one approximation.
+    """
+    model = problem.model
+    n, n_y = model.n_states, model.n_outputs
+    basis = model.terms.basis
+    values = model.unpack(theta)
+    Y_lin, X_lin, _ = problem.simulate(theta)
+    S = np.hstack([X_lin, problem.U])
+    rows = problem.fit_rows
+    V, Z = _branch_inputs(V, S, rows)
+    rank, n_fun = V.shape[1], basis.n_functions
+    x0 = np.zeros(n)
+    pulses = StateSpaceModel(n, 1, n_y)
+    columns = []
+    for l in range(rank):
+        phi = basis.evaluate(Z[:, l])[0]
+        for m in range(n_fun):
+            for i in range(n):
+                e = np.zeros((n, 1))
+                e[i] = 1.0
+                theta_i = pulses.pack({"A": values["A"], "B": e, "C": values["C"],
+                                       "D": np.zeros((n_y, 1))})
+                columns.append(pulses.simulate(theta_i, phi[:, m : m + 1], problem.starts,
+                                               x0)[0][rows])
+            for j in range(n_y):
+                direct = np.zeros((len(phi), n_y))
+                direct[:, j] = phi[:, m]
+                columns.append(direct[rows])
+    regressors = np.stack([c.ravel() for c in columns], axis=1)
+    target = (problem.Y - Y_lin)[rows].ravel()
+    gram = regressors.T @ regressors
+    gram[np.diag_indices_from(gram)] += _RIDGE * np.trace(gram) / len(gram)
+    products = np.linalg.solve(gram, regressors.T @ target)
+    # products[l, m, k] multiplies W[k, l] c[l, m] (k over states, then outputs).
+    products = products.reshape(rank, n_fun, n + n_y)
+    W = np.empty((n + n_y, rank))
+    coefficients = np.empty((rank, n_fun))
+    for l in range(rank):
+        left, sigma, right = np.linalg.svd(products[l].T, full_matrices=False)
+        W[:, l] = left[:, 0] * np.sqrt(sigma[0])
+        coefficients[l] = right[0] * np.sqrt(sigma[0])
+    return V, W, coefficients
+
+
+class NLLFRRegressor(_BaseNonlinearStateSpace):
+    """Nonlinear linear-fractional model: linear dynamics, static nonlinearity in feedback.
+
+    The model is, in normalised signal units,
+
+    .. math::
+
+        x(t+1) &= A x(t) + B u(t) + B_w w(t) \\\\
+        y(t)   &= C x(t) + D u(t) + D_w w(t) \\\\
+        z(t)   &= C_z x(t) + D_z u(t), \\qquad
+        w_l(t) = \\sum_k c_{lk} \\phi_k(z_l(t)),
+
+    with ``n_branches`` branches over a univariate basis :math:`\\phi`. A, B,
+    C, D start from the Best Linear Approximation; the branch inputs start
+    along the BLA's outputs (further branches and starts in random
+    directions), and the branch outputs and coefficients from a linear
+    least-squares fit along the BLA's trajectory. All parameters are then
+    refined by Levenberg-Marquardt on the simulation error.
+
+    Parameters
+    ----------
+    n_states : int, default=2
+        Model order n.
+    n_branches : int, default=1
+        Number of branches r (the size of z and w).
+    basis : basis object, default=None
+        Basis of the branch nonlinearities: :class:`~sknlss.PolynomialBasis`
+        (powers from 2), :class:`~sknlss.LegendreBasis` or
+        :class:`~sknlss.ChebyshevBasis` (bounded, of ``tanh(z)``). ``None``
+        uses ``PolynomialBasis(3)``.
+    estimate_x0 : bool, default=False
+        Estimate the initial state, shared by all sequences; ``predict`` then
+        starts from the fitted ``x0_``.
+    period : int, default=None
+        Number of samples per period of a periodic excitation. When set, every
+        sequence must be a whole number of periods; each sequence is then
+        simulated in steady state by prepending its last ``n_transient``
+        samples (excluded from the cost), in ``fit`` and in ``predict``.
+    cost : {"time", "frequency"}, default="time"
+        Time-domain simulation error, or its per-period DFT weighted by the
+        inverse noise standard deviation (paper eq. 17; needs ``period``).
+    stability_penalty : float, default=0.0
+        Weight of a penalty on local instability along the fitted trajectory:
+        the mean squared excess over 1 of the spectral radius of the state
+        map's Jacobian at every fitted sample, relative to the mean squared
+        residual.
+    weight_decay : float, default=0.0
+        Weight of the squared size of the branches (Bw, Dw and the
+        coefficients, each scaled by the RMS of its basis function along the
+        initial trajectory), relative to the mean squared residual.
+    refine_linear : bool, default=False
+        Refine A, B, C, D (and x0) on the simulation error before the
+        branches are initialised.
+    bla : BLAEstimator, default=None
+        Settings of the linear model used for the initialisation; it is given
+        this model's ``n_states``, ``estimate_x0`` and (if its own is None)
+        ``period``. ``None`` uses :class:`~sknlss.BLAEstimator`'s defaults.
+    max_iter : int, default=100
+        Maximum number of Levenberg-Marquardt iterations of each start.
+    tol : float, default=1e-9
+        Relative cost decrease below which the iterations stop.
+    validation_fraction : float, default=0.0
+        Fraction at the end of every sequence held out from the cost; the
+        iterate (and start) with the lowest simulation error there is kept.
+    n_iter_no_change : int, default=None
+        Stop a search once the validation loss has not improved for this many
+        iterations (no effect without hold-out).
+    n_init : int, default=1
+        Number of starts: the first with the branch inputs along the BLA's
+        outputs, the others in random directions.
+    n_jobs : int, default=None
+        Number of joblib workers for the starts.
+    random_state : int, RandomState instance or None, default=None
+        Seeds the random branch directions.
+    n_transient : int, default=0
+        Samples per sequence excluded from the cost and the score; with
+        ``period``, the number of samples prepended for the steady state.
+    verbose : int, default=0
+        Print the progress of the optimisation.
+
+    Attributes
+    ----------
+    A_ : ndarray of shape (n_states, n_states)
+    B_ : ndarray of shape (n_states, n_inputs)
+    C_ : ndarray of shape (n_outputs, n_states)
+    D_ : ndarray of shape (n_outputs, n_inputs)
+    Bw_ : ndarray of shape (n_states, n_branches)
+        How the branch outputs enter the states.
+    Dw_ : ndarray of shape (n_outputs, n_branches)
+        How the branch outputs enter the outputs.
+    Cz_ : ndarray of shape (n_branches, n_states)
+    Dz_ : ndarray of shape (n_branches, n_inputs)
+        Branch inputs ``z = Cz x + Dz u``.
+    coefficients_ : ndarray of shape (n_branches, n_basis_functions)
+        Basis coefficients of each branch.
+    x0_ : ndarray of shape (n_states,)
+        Initial state (zero unless ``estimate_x0``).
+    bla_ : BLAEstimator
+        The fitted linear model of the initialisation; it predicts and
+        reports its FRF in the user's units.
+    n_params_ : int
+        Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
+        ``+ r (n + n_y) + r (n + n_u) + r n_basis`` (plus ``n`` for x0).
+    n_iter_ : int
+        Number of accepted Levenberg-Marquardt steps of the kept start.
+    loss_history_ : ndarray of shape (n_iter_ + 1,)
+        Cost per iteration.
+    validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
+        Held-out loss per iteration.
+    best_iteration_ : int
+        Iteration whose parameters were kept.
+    n_features_in_ : int
+        Number of inputs.
+    u_offset_, u_scale_, y_offset_, y_scale_ : ndarray
+        Normalisation of the signals.
+
+    See Also
+    --------
+    DecoupledPNLSS : Branches obtained by decoupling a PNLSS model.
+    PNLSSRegressor : Full multivariate polynomial terms.
+
+    References
+    ----------
+    J. Floren, J.-P. Noël and J. Swevers, "Inference and learning of
+    nonlinear LFR state-space models", IEEE Control Systems Letters, 2025.
+
+    L. Van Mulders, J. Schoukens and L. Vanbeylen, "Identification of systems
+    with localised nonlinearity: from state-space to block-structured
+    models", Automatica 49(5), 2013.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sknlss import NLLFRRegressor
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal((500, 1))
+    >>> x = np.zeros(2)
+    >>> y = np.empty(500)
+    >>> for t in range(500):
+    ...     y[t] = x[0]
+    ...     x = np.array([1.5 * x[0] - 0.7 * x[1] - 0.1 * x[0] ** 3 + u[t, 0], x[0]])
+    >>> model = NLLFRRegressor(n_states=2, max_iter=30).fit(u, y)
+    >>> model.n_params_
+    15
+    >>> bool(model.score(u, y) > 0.99)
+    True
+    """
+
+    _parameter_constraints: dict = {
+        **_BaseNonlinearStateSpace._parameter_constraints,
+        "n_branches": [Interval(Integral, 1, None, closed="left")],
+        "basis": [HasMethods(["evaluate"]), None],
+    }
+
+    _label = "NL-LFR"
+
+    def __init__(self, n_states=2, *, n_branches=1, basis=None, estimate_x0=False,
+                 period=None, cost="time", stability_penalty=0.0, weight_decay=0.0,
+                 refine_linear=False, bla=None, max_iter=100, tol=1e-9,
+                 validation_fraction=0.0, n_iter_no_change=None, n_init=1, n_jobs=None,
+                 random_state=None, n_transient=0, verbose=0):
+        self.n_states = n_states
+        self.n_branches = n_branches
+        self.basis = basis
+        self.estimate_x0 = estimate_x0
+        self.period = period
+        self.cost = cost
+        self.stability_penalty = stability_penalty
+        self.weight_decay = weight_decay
+        self.refine_linear = refine_linear
+        self.bla = bla
+        self.max_iter = max_iter
+        self.tol = tol
+        self.validation_fraction = validation_fraction
+        self.n_iter_no_change = n_iter_no_change
+        self.n_init = n_init
+        self.n_jobs = n_jobs
+        self.random_state = random_state
+        self.n_transient = n_transient
+        self.verbose = verbose
+
+    def _basis(self):
+        return PolynomialBasis(3) if self.basis is None else self.basis
+
+    def _make_terms(self, n_inputs, n_outputs):
+        return BranchTerms(self.n_states, n_inputs, n_outputs, self.n_branches,
+                           self._basis())
+
+    def _n_drop(self, model):
+        # Similarity transforms of the states, the scaling of each branch's
+        # output and, for a power basis, of each branch's input leave the
+        # simulated output unchanged.
+        per_branch = 2 if isinstance(self._basis(), PolynomialBasis) else 1
+        return model.n_states**2 + per_branch * self.n_branches
+
+    def _prepare_starts(self, context):
+        if self.weight_decay:
+            problem, model = context["problem"], context["model"]
+            V, W, c = _least_squares_terms(problem, context["theta"],
+                                           self._directions(context, 0, context["seeds"][0]))
+            values = model.unpack(context["theta"])
+            problem.set_decay_scale(model.pack(dict(values, V=V, W=W, coefficients=c)))
+
+    def _directions(self, context, start, seed):
+        """Branch directions V of a start: along the outputs of the linear
+        model first (for the first start), random otherwise."""
+        model = context["model"]
+        n, n_u = model.n_states, model.n_inputs
+        values = model.unpack(context["theta"])
+        rng = check_random_state(seed)
+        V = rng.standard_normal((n + n_u, self.n_branches))
+        if start == 0:
+            along_outputs = np.hstack([values["C"], values["D"]]).T
+            k = min(self.n_branches, along_outputs.shape[1])
+            V[:, :k] = along_outputs[:, :k]
+        return V
+
+    def _starting_points(self, context, start, seed):
+        problem, model = context["problem"], context["model"]
+        V, W, c = _least_squares_terms(problem, context["theta"],
+                                       self._directions(context, start, seed))
+        values = model.unpack(context["theta"])
+        theta = model.pack(dict(values, V=V, W=W, coefficients=c))
+        # With weaker feedback the model is closer to the (stable) linear one;
+        # without it, it is the linear model itself, a start that cannot fail to
+        # simulate, from which the search grows the branches.
+        return [theta] + [model.pack(dict(values, V=V, W=factor * W, coefficients=c))
+                          for factor in (1e-3, 0.0)]
+
+    def _set_terms(self, values):
+        n = self.n_states
+        V, W = values["V"], values["W"]
+        self.Cz_, self.Dz_ = V[:n].T.copy(), V[n:].T.copy()
+        self.Bw_, self.Dw_ = W[:n].copy(), W[n:].copy()
+        self.coefficients_ = values["coefficients"]
+
+    def _terms_values(self):
+        return {"V": np.vstack([self.Cz_.T, self.Dz_.T]), "coefficients": self.coefficients_,
+                "W": np.vstack([self.Bw_, self.Dw_])}

@@ -1,0 +1,214 @@
+"""The fit shared by the nonlinear state-space estimators.
+
+Every nonlinear estimator identifies ``x(t+1) = A x + B u + h_x(x, u)``,
+``y(t) = C x + D u + h_y(x, u)`` with its own terms ``h`` the same way:
+
+1. the rows of the fit: the cost rows, the held-out tail of every sequence and
+   the transient (dropped, or replaced by a steady-state extension for
+   periodic data);
+2. the Best Linear Approximation on the rows before the held-out tails,
+   exposed as ``bla_`` in the user's units;
+3. optionally, the linear part (and x0) refined on the simulation error with
+   the terms switched off;
+4. one or more starting points of the terms (the estimator's own
+   initialisation), each refined by Levenberg-Marquardt on the shared
+   :class:`~sknlss._core._problem.SimulationErrorProblem`; the start with the
+   lowest held-out loss is kept.
+
+A subclass provides its terms (``_make_terms``), its starting points
+(``_prepare_starts`` and ``_starting_points``) and its fitted attributes
+(``_set_terms`` and ``_terms_values``).
+"""
+
+from abc import abstractmethod
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from .._core._model import StateSpaceModel
+from .._core._multistart import fit_from, run_starts
+from .._core._problem import SimulationErrorProblem, fit_rows
+from .._core._sequences import part_before_holdout, steady_state_rows
+from ._base import _BaseStateSpace, normalisation_of
+from ._bla import BLAEstimator, fit_linear_model, fitted_bla
+
+
+class _BaseNonlinearStateSpace(_BaseStateSpace):
+    """Base class of the nonlinear state-space estimators (see the module docstring)."""
+
+    _parameter_constraints: dict = {
+        **_BaseStateSpace._parameter_constraints,
+        "n_states": [Interval(Integral, 1, None, closed="left")],
+        "estimate_x0": ["boolean"],
+        "period": [Interval(Integral, 1, None, closed="left"), None],
+        "cost": [StrOptions({"time", "frequency"})],
+        "stability_penalty": [Interval(Real, 0, None, closed="left")],
+        "weight_decay": [Interval(Real, 0, None, closed="left")],
+        "refine_linear": ["boolean"],
+        "bla": [BLAEstimator, None],
+        "max_iter": [Interval(Integral, 0, None, closed="left")],
+        "tol": [Interval(Real, 0, None, closed="left")],
+        "validation_fraction": [Interval(Real, 0, 1, closed="left")],
+        "n_iter_no_change": [Interval(Integral, 1, None, closed="left"), None],
+        "n_init": [Interval(Integral, 1, None, closed="left")],
+        "n_jobs": [Integral, None],
+        "random_state": ["random_state"],
+        "verbose": ["verbose"],
+    }
+
+    #: Name of the model in progress lines and warnings.
+    _label = "model"
+
+    # ------------------------------------------------------------ subclass API
+    @abstractmethod
+    def _make_terms(self, n_inputs, n_outputs):
+        """The terms object of the model for the given dimensions."""
+
+    @abstractmethod
+    def _starting_points(self, context, start, seed):
+        """Candidate starting parameter vectors of start number ``start``
+        (random seed ``seed``), tried in turn until one simulates (see
+        :func:`~sknlss._core._multistart.fit_from`)."""
+
+    def _prepare_starts(self, context):
+        """Work shared by all starts, added to the ``context`` dict in place."""
+
+    @abstractmethod
+    def _set_terms(self, values):
+        """Set the fitted attributes of the terms from the unpacked parameters."""
+
+    @abstractmethod
+    def _terms_values(self):
+        """The fitted terms' parameter blocks, keyed by block name."""
+
+    def _n_drop(self, model):
+        """Directions of the parameter space that leave the output unchanged
+        (discarded from the Levenberg-Marquardt step)."""
+        return model.n_states**2
+
+    def _centred(self):
+        """Whether the signals are centred (else only scaled)."""
+        return True
+
+    # ------------------------------------------------------------------- fit
+    def _validate_training_data(self, X, y, sequence_id):
+        U, Y, starts = super()._validate_training_data(X, y, sequence_id)
+        if not self._centred():
+            # Scale only: the model is expanded around the signals' own zero,
+            # not around their means.
+            U = np.ascontiguousarray(U + self.u_offset_ / self.u_scale_)
+            Y = np.ascontiguousarray(Y + self.y_offset_ / self.y_scale_)
+            self.u_offset_ = np.zeros_like(self.u_offset_)
+            self.y_offset_ = np.zeros_like(self.y_offset_)
+        return U, Y, starts
+
+    def _check_periodic(self, starts):
+        if self.cost == "frequency" and self.period is None:
+            raise ValueError("cost='frequency' needs the period of the excitation.")
+        if self.period is not None:
+            lengths = np.diff(starts)
+            if np.any(lengths % self.period):
+                raise ValueError(
+                    f"With period={self.period}, every sequence must hold a whole number "
+                    f"of periods; got sequence lengths {lengths.tolist()}."
+                )
+
+    def _linear_start(self, U, Y, starts, fit_mask):
+        """The linear part and initial state the nonlinear model starts from:
+        the BLA on the rows before the held-out tails (also set as ``bla_``,
+        in the user's units)."""
+        params = (self.bla if self.bla is not None else BLAEstimator()).get_params()
+        params.update(n_states=self.n_states, estimate_x0=self.estimate_x0)
+        if params["period"] is None:
+            params["period"] = self.period
+        linear = fit_linear_model(*part_before_holdout(U, Y, starts, fit_mask), params)
+        self.bla_ = fitted_bla(params, linear, normalisation_of(self))
+        return linear.A, linear.B, linear.C, linear.D, linear.x0
+
+    def _refined_linear_start(self, problem, theta):
+        """The starting parameters with the linear part (and x0) refined on the
+        simulation error, the terms switched off (with ``refine_linear``)."""
+        if not self.refine_linear or self.max_iter == 0:
+            return theta
+        # A poor nonparametric BLA (short or noisy records) would otherwise
+        # start the nonlinear search far away.
+        model = problem.model
+        free = model.linear_columns
+        options = dict(self._lm_options(model), n_drop=model.n_states**2)
+        theta = theta.copy()
+        theta[free] = fit_from(problem.restricted(theta, free), [theta[free]],
+                               label=f"{self._label} (linear part)", **options)[0]
+        return theta
+
+    def _record_start(self, context, start, seed):
+        """Record what the kept start's initialisation found (nothing by default)."""
+
+    def _lm_options(self, model):
+        return dict(max_iter=self.max_iter, tol=self.tol, n_drop=self._n_drop(model),
+                    n_iter_no_change=self.n_iter_no_change, verbose=self.verbose)
+
+    def _fit_normalized(self, U, Y, starts):
+        self._check_periodic(starts)
+        rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
+                        validation_fraction=self.validation_fraction,
+                        steady_state_period=self.period)
+        A, B, C, D, x0 = self._linear_start(U, Y, starts, rows.fit_rows[rows.original])
+        model = StateSpaceModel(self.n_states, U.shape[1], Y.shape[1],
+                                self._make_terms(U.shape[1], Y.shape[1]),
+                                estimate_x0=self.estimate_x0)
+        problem = SimulationErrorProblem(
+            model, rows, frequency_period=self.period if self.cost == "frequency" else None,
+            stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
+        )
+        values = {name: np.zeros(shape) for name, shape in model.blocks}
+        values.update(A=A, B=B, C=C, D=D, x0=x0)
+        theta = self._refined_linear_start(problem, model.pack(values))
+        seeds = check_random_state(self.random_state).randint(
+            np.iinfo(np.int32).max, size=self.n_init)
+        context = {"problem": problem, "model": model, "theta": theta, "U": U, "Y": Y,
+                   "starts": starts, "rows": rows, "seeds": seeds}
+        self._prepare_starts(context)
+        options = self._lm_options(model)
+        outcomes, best = run_starts(
+            _fit_start,
+            [(self, context, i, seed, f"{self._label} start {i}" if self.n_init > 1
+              else self._label, options) for i, seed in enumerate(seeds)],
+            n_jobs=self.n_jobs,
+        )
+        if best is None:
+            raise outcomes[0]
+        theta, result = outcomes[best]
+        self._record_start(context, best, seeds[best])
+        values = model.unpack(theta)
+        self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
+        self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
+        self._set_terms(values)
+        # The structure the predictions simulate (the initial state is passed).
+        self._model = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs,
+                                      model.terms)
+        self.n_params_ = int(model.n_params)
+        self._set_search_result(result)
+
+    # ------------------------------------------------------------ simulation
+    def _fitted_model(self):
+        values = {"A": self.A_, "B": self.B_, "C": self.C_, "D": self.D_}
+        values.update(self._terms_values())
+        return self._model, self._model.pack(values)
+
+    def _simulate_normalized(self, U, starts, x0):
+        lengths = np.diff(starts)
+        if self.period is None or self.n_transient == 0 or np.any(lengths % self.period):
+            return super()._simulate_normalized(U, starts, x0)
+        # Periodic data: every sequence starts in steady state, as in the fit.
+        index, sim_starts, original = steady_state_rows(starts, self.n_transient)
+        Y, X, diverged = super()._simulate_normalized(np.ascontiguousarray(U[index]),
+                                                      sim_starts, x0)
+        return Y[original], X[original], diverged
+
+
+def _fit_start(estimator, context, start, seed, label, options):
+    """One start: the estimator's candidates, then Levenberg-Marquardt."""
+    candidates = estimator._starting_points(context, start, seed)
+    return fit_from(context["problem"], candidates, label=label, **options)

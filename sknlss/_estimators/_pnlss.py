@@ -1,0 +1,279 @@
+"""Polynomial nonlinear state-space (PNLSS) models.
+
+Paper §3.1, §4.1 and §5.1: the linear part is initialised from the Best Linear
+Approximation, the polynomial coefficients E and F from zero, and all of them
+(optionally with the initial state, PNLSS-I) are refined by Levenberg-Marquardt
+on the simulation error, in the time domain or, for periodic data, in the
+frequency domain with noise weighting (paper eq. 17).
+"""
+
+from numbers import Integral
+
+import numpy as np
+from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from .._terms._polynomial import STRUCTURES, PolynomialTerms, monomial_exponents
+from ._nonlinear import _BaseNonlinearStateSpace
+
+# Size of the random polynomial coefficients of the starts after the first,
+# relative to the RMS of each monomial along the linear model's trajectory: a
+# nudge off the linear model that keeps every start close to it.
+_START_SCALE = 0.01
+
+
+class PNLSSRegressor(_BaseNonlinearStateSpace):
+    """Polynomial nonlinear state-space model (PNLSS, PNLSS-I).
+
+    The model is, in scaled signal units (see ``center``),
+
+    .. math::
+
+        x(t+1) &= A x(t) + B u(t) + E \\zeta(x(t), u(t)) \\\\
+        y(t)   &= C x(t) + D u(t) + F \\eta(x(t), u(t))
+
+    where :math:`\\zeta` and :math:`\\eta` hold monomials in :math:`[x; u]`.
+    A, B, C, D are initialised from the Best Linear Approximation, E and F from
+    zero, and all of them are refined by Levenberg-Marquardt on the simulation
+    error with an analytic Jacobian.
+
+    Parameters
+    ----------
+    n_states : int, default=2
+        Model order n.
+    degree : int or tuple of int, default=(2, 3)
+        Total degrees of the monomials in zeta and eta.
+    state_terms : {"full", "states_only", "no_cross_products", "inputs_only"} \
+            or array-like of shape (n_zeta, n_states + n_inputs), default="full"
+        Monomials of the state equation: all of them, those in x only, pure
+        powers only, those in u only, or an explicit exponent array.
+    output_terms : same as ``state_terms``, default="full"
+        Monomials of the output equation.
+    estimate_x0 : bool, default=False
+        Estimate the initial state, shared by all sequences (PNLSS-I);
+        ``predict`` then starts from the fitted ``x0_``.
+    center : bool, default=False
+        Expand the polynomials around the mean of the signals (zero mean, unit
+        standard deviation) instead of around the signals' own zero (only
+        scaled, as in the PNLSS toolbox). By default a polynomial system whose
+        zero is a rest state is exactly representable; centring gives a
+        different model class (no offset terms) that does not depend on the
+        signals' offsets, matches the BLA initialisation to the data's mean
+        level and makes a zero initial state the mean operating point, which
+        matters for records that do not start at rest when x0 is not
+        estimated.
+    refine_linear : bool, default=False
+        Before the nonlinear terms are freed, refine A, B, C, D (and x0) on
+        the same cost with E = F = 0. This recovers from a poor nonparametric
+        BLA (short or noisy records); ``False`` starts the nonlinear
+        optimisation from the BLA itself, as in the paper.
+    period : int, default=None
+        Number of samples per period of a periodic excitation. When set, every
+        sequence must be a whole number of periods; each sequence is then
+        simulated in steady state by prepending its last ``n_transient``
+        samples (excluded from the cost), in ``fit`` and in ``predict`` (for
+        sequences whose length is a multiple of ``period``).
+    cost : {"time", "frequency"}, default="time"
+        Time-domain simulation error, or its per-period DFT at all lines
+        weighted by the inverse noise standard deviation (paper eq. 17; needs
+        ``period``). The noise variance comes from the variation over the
+        periods of each sequence; with one period only the weights are 1.
+    stability_penalty : float, default=0.0
+        Weight of a penalty on local instability along the fitted trajectory:
+        the mean squared excess over 1 of the spectral radius of the state
+        map's Jacobian ``A + E dzeta/dx`` at every fitted sample, relative to
+        the mean squared residual. Positive values steer the search towards
+        models that are locally contracting wherever the data take the states,
+        so that they do not blow up on inputs that push the states a little
+        beyond the estimation data. 0 (the paper's cost) disables it.
+    weight_decay : float, default=0.0
+        Weight of the squared size of the polynomial terms, relative to the
+        mean squared residual: ``sum_k (c_k e_k)^2`` over the coefficients
+        ``e_k`` of E and F, with ``c_k`` the RMS of the k-th monomial along
+        the trajectory of the initial (linear) model.
+    bla : BLAEstimator, default=None
+        Settings of the linear model used for the initialisation; it is given
+        this model's ``n_states``, ``estimate_x0`` and (if its own is None)
+        ``period``. ``None`` uses :class:`~sknlss.BLAEstimator`'s defaults.
+    max_iter : int, default=100
+        Maximum number of Levenberg-Marquardt iterations.
+    tol : float, default=1e-9
+        Relative cost decrease below which the iterations stop.
+    validation_fraction : float, default=0.0
+        Fraction at the end of every sequence held out from the cost; the
+        iterate with the lowest simulation error there is kept (the held-out
+        tail continues the simulation of the fitted part). 0 keeps the last
+        iterate.
+    n_iter_no_change : int, default=None
+        Stop once the validation loss has not improved for this many
+        iterations (early stopping; it has no effect when
+        ``validation_fraction=0``). ``None`` iterates until ``max_iter`` or
+        ``tol``.
+    n_init : int, default=1
+        Number of starts: the first from the linear model (E = F = 0), the
+        others from small random polynomial terms around it; the start with
+        the lowest validation loss (training loss without hold-out) is kept.
+    n_jobs : int, default=None
+        Number of joblib workers for the starts.
+    random_state : int, RandomState instance or None, default=None
+        Seeds the starts after the first.
+    n_transient : int, default=0
+        Samples per sequence excluded from the cost and the score; with
+        ``period``, the number of samples prepended for the steady state.
+    verbose : int, default=0
+        Print the progress of the optimisation.
+
+    Attributes
+    ----------
+    A_ : ndarray of shape (n_states, n_states)
+    B_ : ndarray of shape (n_states, n_inputs)
+    C_ : ndarray of shape (n_outputs, n_states)
+    D_ : ndarray of shape (n_outputs, n_inputs)
+    E_ : ndarray of shape (n_states, n_zeta)
+        Coefficients of the state-equation monomials.
+    F_ : ndarray of shape (n_outputs, n_eta)
+        Coefficients of the output-equation monomials.
+    state_exponents_ : ndarray of shape (n_zeta, n_states + n_inputs)
+        Exponents of the monomials in zeta.
+    output_exponents_ : ndarray of shape (n_eta, n_states + n_inputs)
+        Exponents of the monomials in eta.
+    x0_ : ndarray of shape (n_states,)
+        Initial state (zero unless ``estimate_x0``).
+    n_params_ : int
+        Number of free parameters, as counted in the paper:
+        ``n^2 + n n_u + n_y n + n_y n_u + n n_zeta + n_y n_eta`` (plus ``n``
+        when x0 is estimated).
+    n_iter_ : int
+        Number of accepted Levenberg-Marquardt steps.
+    loss_history_ : ndarray of shape (n_iter_ + 1,)
+        Cost per iteration (mean squared residual; weighted spectra for
+        ``cost="frequency"``), including the ``stability_penalty`` and
+        ``weight_decay`` terms.
+    validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
+        Mean squared simulation error on the held-out rows per iteration.
+    best_iteration_ : int
+        Iteration whose parameters were kept.
+    bla_ : BLAEstimator
+        The fitted linear model used for the initialisation (fitted on the rows
+        before the held-out tails, in this model's state coordinates); it
+        predicts and reports its FRF in the user's units.
+    n_features_in_ : int
+        Number of inputs seen during ``fit``.
+    u_offset_, u_scale_ : ndarray of shape (n_inputs,)
+        Normalisation of the inputs.
+    y_offset_, y_scale_ : ndarray of shape (n_outputs,)
+        Normalisation of the outputs.
+
+    See Also
+    --------
+    BLAEstimator : The linear model used for the initialisation.
+    DecoupledPNLSS : PNLSS with decoupled polynomials (fewer parameters).
+    NLSS2Regressor : Nonlinear state space with neural-network terms.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sknlss import PNLSSRegressor
+    >>> rng = np.random.default_rng(0)
+    >>> u = 0.3 * rng.normal(size=(400, 1))
+    >>> y = np.zeros(400)
+    >>> x = 0.0
+    >>> for t in range(400):
+    ...     y[t] = x
+    ...     x = 0.5 * x + u[t, 0] + 0.1 * x**2
+    >>> model = PNLSSRegressor(n_states=1, degree=2, max_iter=20).fit(u, y)
+    >>> bool(model.score(u, y) > 0.99)
+    True
+    """
+
+    _parameter_constraints: dict = {
+        **_BaseNonlinearStateSpace._parameter_constraints,
+        "degree": [Interval(Integral, 2, None, closed="left"), "array-like"],
+        "state_terms": [StrOptions(set(STRUCTURES)), "array-like"],
+        "output_terms": [StrOptions(set(STRUCTURES)), "array-like"],
+        "center": ["boolean"],
+    }
+
+    _label = "PNLSS"
+
+    def __init__(
+        self,
+        n_states=2,
+        *,
+        degree=(2, 3),
+        state_terms="full",
+        output_terms="full",
+        estimate_x0=False,
+        center=False,
+        refine_linear=False,
+        period=None,
+        cost="time",
+        stability_penalty=0.0,
+        weight_decay=0.0,
+        bla=None,
+        max_iter=100,
+        tol=1e-9,
+        validation_fraction=0.0,
+        n_iter_no_change=None,
+        n_init=1,
+        n_jobs=None,
+        random_state=None,
+        n_transient=0,
+        verbose=0,
+    ):
+        self.n_states = n_states
+        self.degree = degree
+        self.state_terms = state_terms
+        self.output_terms = output_terms
+        self.estimate_x0 = estimate_x0
+        self.center = center
+        self.refine_linear = refine_linear
+        self.period = period
+        self.cost = cost
+        self.stability_penalty = stability_penalty
+        self.weight_decay = weight_decay
+        self.bla = bla
+        self.max_iter = max_iter
+        self.tol = tol
+        self.validation_fraction = validation_fraction
+        self.n_iter_no_change = n_iter_no_change
+        self.n_init = n_init
+        self.n_jobs = n_jobs
+        self.random_state = random_state
+        self.n_transient = n_transient
+        self.verbose = verbose
+
+    def _centred(self):
+        return self.center
+
+    def _make_terms(self, n_inputs, n_outputs):
+        n = self.n_states
+        self.state_exponents_ = monomial_exponents(n, n_inputs, self.degree, self.state_terms)
+        self.output_exponents_ = monomial_exponents(n, n_inputs, self.degree,
+                                                    self.output_terms)
+        return PolynomialTerms(n, n_outputs, self.state_exponents_, self.output_exponents_)
+
+    def _prepare_starts(self, context):
+        problem, theta = context["problem"], context["theta"]
+        if self.weight_decay:
+            problem.set_decay_scale(theta)
+        if self.n_init > 1:
+            terms = problem.model.terms
+            points = np.hstack([problem.simulate(theta)[1], problem.U])[problem.fit_rows]
+            context["monomial_rms"] = terms.decay_scale(None, points)
+
+    def _starting_points(self, context, start, seed):
+        theta = context["theta"].copy()
+        if start > 0:
+            # Later starts: small random polynomial terms around the linear model.
+            columns = context["model"].terms_columns
+            rms = np.maximum(context["monomial_rms"], np.finfo(float).tiny)
+            noise = check_random_state(seed).standard_normal(columns.size)
+            theta[columns] = _START_SCALE * noise / rms
+        return [theta]
+
+    def _set_terms(self, values):
+        self.E_, self.F_ = values["E"], values["F"]
+
+    def _terms_values(self):
+        return {"E": self.E_, "F": self.F_}

@@ -1,0 +1,142 @@
+"""Branch terms: univariate static nonlinearities between two linear maps.
+
+The terms are ``h(s) = W f(V^T s)`` with ``s = [x; u]``, ``r`` branches and
+``f_l(z) = sum_k c[l, k] phi_k(z)`` over a univariate basis (see
+:mod:`sknlss._terms._bases`). Written as a linear-fractional model with the
+branch inputs ``z = Cz x + Dz u`` and outputs ``w = f(z)``,
+
+    x(t+1) = A x + B u + Bw w,   y(t) = C x + D u + Dw w,
+
+``V^T = [Cz, Dz]`` and ``W = [Bw; Dw]``: the NL-LFR model, and the decoupled
+PNLSS model with a power basis. The terms' parameters are
+``[vec(V), vec(c), vec(W)]`` (row-major), so that the parameters entering
+``h_x`` (V, c and the rows of W for the states) come first.
+"""
+
+import numpy as np
+from numba import njit
+
+from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
+from .._core._model import Terms
+from ._bases import basis_functions
+
+# spec = [rank, n_functions, basis code, degrees ...]
+# work = [z (r), g (r), g' (r), phi (r x n_functions), phi' (r x n_functions)]
+_HEADER = 3
+
+
+@njit(cache=True)
+def _layout(spec, n_vars):
+    rank, n_fun = spec[0], spec[1]
+    o_coef = n_vars * rank
+    o_w = o_coef + rank * n_fun
+    return rank, n_fun, o_coef, o_w
+
+
+@njit(EVALUATE, cache=True)
+def _evaluate(theta, spec, s, n, h, work):
+    n_vars = s.shape[0]
+    rank, n_fun, o_coef, o_w = _layout(spec, n_vars)
+    code = spec[2]
+    degrees = spec[_HEADER : _HEADER + n_fun]
+    o_phi = 3 * rank
+    o_dphi = o_phi + rank * n_fun
+    for l in range(rank):
+        z = 0.0
+        for j in range(n_vars):
+            z += theta[j * rank + l] * s[j]
+        work[l] = z
+        basis_functions(code, degrees, z, work, o_phi + l * n_fun, o_dphi + l * n_fun)
+        g = 0.0
+        dg = 0.0
+        for k in range(n_fun):
+            c = theta[o_coef + l * n_fun + k]
+            g += c * work[o_phi + l * n_fun + k]
+            dg += c * work[o_dphi + l * n_fun + k]
+        work[rank + l] = g
+        work[2 * rank + l] = dg
+    for i in range(h.shape[0]):
+        acc = 0.0
+        for l in range(rank):
+            acc += theta[o_w + i * rank + l] * work[rank + l]
+        h[i] = acc
+
+
+@njit(STATE_JACOBIAN, cache=True)
+def _state_jacobian(theta, spec, s, n, dh_dx, work):
+    rank = spec[0]
+    o_w = _layout(spec, s.shape[0])[3]
+    for i in range(dh_dx.shape[0]):
+        for j in range(n):
+            acc = 0.0
+            for l in range(rank):
+                acc += theta[o_w + i * rank + l] * work[2 * rank + l] * theta[j * rank + l]
+            dh_dx[i, j] = acc
+
+
+@njit(cache=True)
+def _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, first_row, out, out_offset,
+              with_w):
+    """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V, c
+    (and, with ``with_w``, W) added to ``out`` from column ``out_offset``."""
+    o_phi = 3 * rank
+    for r in range(out.shape[0]):
+        i = first_row + r
+        row = out[r]
+        for l in range(rank):
+            w = theta[o_w + i * rank + l]
+            slope = w * work[2 * rank + l]
+            for j in range(s.shape[0]):
+                row[out_offset + j * rank + l] += slope * s[j]
+            for k in range(n_fun):
+                row[out_offset + o_coef + l * n_fun + k] += w * work[o_phi + l * n_fun + k]
+            if with_w:
+                row[out_offset + o_w + i * rank + l] += work[rank + l]
+
+
+@njit(PARAMETER_JACOBIAN, cache=True)
+def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
+                        output_offset):
+    rank, n_fun, o_coef, o_w = _layout(spec, s.shape[0])
+    _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, 0, state_out, state_offset, True)
+    if output_offset >= 0:
+        _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, n, output_out, output_offset,
+                  True)
+
+
+class BranchTerms(Terms):
+    """``h(s) = W f(V^T s)`` with ``rank`` univariate branches over ``basis``.
+
+    Parameters
+    ----------
+    n_states, n_inputs, n_outputs : int
+        Dimensions.
+    rank : int
+        Number of branches.
+    basis : basis object
+        Univariate basis of the branches (:mod:`sknlss._terms._bases`).
+    """
+
+    evaluate = staticmethod(_evaluate)
+    state_jacobian = staticmethod(_state_jacobian)
+    parameter_jacobian = staticmethod(_parameter_jacobian)
+
+    def __init__(self, n_states, n_inputs, n_outputs, rank, basis):
+        degrees = basis.degrees
+        n_vars, n_fun = n_states + n_inputs, len(degrees)
+        self.basis = basis
+        self.blocks = [("V", (n_vars, rank)), ("coefficients", (rank, n_fun)),
+                       ("W", (n_states + n_outputs, rank))]
+        self.spec = np.concatenate([[rank, n_fun, basis.code], degrees]).astype(np.int64)
+        self.work_size = 3 * rank + 2 * rank * n_fun
+        self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
+
+    def decay_scale(self, theta_terms, S):
+        """The branch coefficients, each scaled by the RMS of its basis function
+        along the trajectory, and the output directions W."""
+        (_, (n_vars, rank)), (_, (_, n_fun)), (_, (n_rows, _)) = self.blocks
+        V = theta_terms[: n_vars * rank].reshape(n_vars, rank)
+        Z = np.asarray(S) @ V
+        rms = np.stack([np.sqrt(np.mean(self.basis.evaluate(Z[:, l])[0] ** 2, axis=0))
+                        for l in range(rank)])
+        return np.concatenate([np.zeros(n_vars * rank), rms.ravel(), np.ones(n_rows * rank)])

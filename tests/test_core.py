@@ -1,0 +1,269 @@
+"""The shared simulation-error core: kernels, terms contract, problem, starts."""
+
+import numpy as np
+import pytest
+from _numeric import central_differences
+
+from sknlss import ChebyshevBasis, LegendreBasis, PolynomialBasis
+from sknlss._core._kernels import DIVERGENCE_BOUND
+from sknlss._core._model import StateSpaceModel
+from sknlss._core._multistart import fit_from, run_starts
+from sknlss._core._optimize import LMResult
+from sknlss._core._problem import SimulationErrorProblem, fit_rows, spectral_radius
+from sknlss._core._sequences import steady_state_rows
+from sknlss._terms._branches import BranchTerms
+from sknlss._terms._network import NetworkTerms
+from sknlss._terms._polynomial import PolynomialTerms, evaluate_monomials, monomial_exponents
+
+TERMS = {
+    "polynomial": lambda n, n_u, n_y: PolynomialTerms(
+        n, n_y, monomial_exponents(n, n_u, (2, 3)), monomial_exponents(n, n_u, 2)),
+    "polynomial-states": lambda n, n_u, n_y: PolynomialTerms(
+        n, n_y, monomial_exponents(n, n_u, (2, 3), "states_only"),
+        monomial_exponents(n, n_u, 3, "no_cross_products")),
+    "network-sigmoid": lambda n, n_u, n_y: NetworkTerms(n, n_u, n_y, 3, "sigmoid"),
+    "network-tanh": lambda n, n_u, n_y: NetworkTerms(n, n_u, n_y, 2, "tanh"),
+    "branches-powers": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 3, PolynomialBasis(3)),
+    "branches-odd": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 2,
+                                                    PolynomialBasis(5, kind="odd")),
+    "branches-legendre": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 2, LegendreBasis(3)),
+    "branches-chebyshev": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 1,
+                                                          ChebyshevBasis(4)),
+}
+DIMS = {"SISO": (2, 1, 1), "MIMO": (3, 2, 2)}
+
+
+def _model(terms, dims, estimate_x0=False, seed=0):
+    n, n_u, n_y = dims
+    model = StateSpaceModel(n, n_u, n_y, TERMS[terms](n, n_u, n_y), estimate_x0=estimate_x0)
+    rng = np.random.default_rng(seed)
+    theta = 0.2 * rng.standard_normal(model.n_params)
+    A = rng.standard_normal((n, n))
+    theta[model.columns("A")] = (0.7 * A / max(abs(np.linalg.eigvals(A)))).ravel()
+    theta[model.terms_columns] *= 0.3
+    return model, theta
+
+
+def _data(n_u, seed=1, n_samples=90):
+    rng = np.random.default_rng(seed)
+    return 0.5 * rng.standard_normal((n_samples, n_u)), np.array([0, 35, n_samples])
+
+
+@pytest.mark.parametrize("dims", DIMS.values(), ids=DIMS.keys())
+@pytest.mark.parametrize("terms", TERMS)
+@pytest.mark.parametrize("estimate_x0", [False, True])
+def test_jacobian_matches_central_differences(terms, dims, estimate_x0):
+    model, theta = _model(terms, dims, estimate_x0)
+    U, starts = _data(dims[1])
+    # Rows outside the cost (here every fifth) are not stored.
+    kept = np.arange(len(U)) % 5 != 0
+    rows = np.where(kept, np.cumsum(kept) - 1, -1)
+    Y, X, J, diverged = model.sensitivities(theta, U, starts, rows)
+    assert not diverged
+    Y_sim, X_sim, diverged = model.simulate(theta, U, starts)
+    assert not diverged
+    np.testing.assert_array_equal(Y, Y_sim)
+    np.testing.assert_array_equal(X, X_sim)
+    assert J.shape == (kept.sum(), dims[2], model.n_params)
+    J_fd = central_differences(lambda th: model.simulate(th, U, starts)[0], theta)[kept]
+    scale = np.abs(J_fd).max()
+    np.testing.assert_allclose(J, J_fd, rtol=0, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize("terms", TERMS)
+def test_local_jacobians_and_curvature_match_central_differences(terms):
+    dims = DIMS["MIMO"]
+    n, n_u, n_y = dims
+    model, theta = _model(terms, dims, seed=3)
+    S = 0.5 * np.random.default_rng(4).standard_normal((6, n + n_u))
+    L = model.local_jacobians(theta, S)
+    assert L.shape == (6, n + n_y, n)
+
+    def one_step(x, u):
+        """[x(t+1); y(t)] from x(t) = x."""
+        Y, X, _ = model.simulate(theta, np.vstack([u, u]), np.array([0, 2]), x0=x)
+        return np.r_[X[1], Y[0]]
+
+    for t in range(len(S)):
+        step = central_differences(lambda x: one_step(x, S[t, n:]), S[t, :n])
+        np.testing.assert_allclose(L[t], step, atol=1e-7)
+    G = np.random.default_rng(5).standard_normal((6, n, n))
+    contraction = model.curvature_contraction(theta, S, G, 1e-5)
+    columns = model.terms_columns[: model.terms.n_state_params]
+
+    def weighted(th):
+        return np.einsum("tij,tij->t", G, model.local_jacobians(th, S)[:, :n])
+
+    expected = central_differences(weighted, theta)[:, columns]
+    np.testing.assert_allclose(contraction, expected, atol=1e-6 * np.abs(expected).max())
+
+
+def test_polynomial_terms_match_plain_numpy():
+    model, theta = _model("polynomial", DIMS["MIMO"])
+    U, starts = _data(2)
+    values = model.unpack(theta)
+    exponents = model.terms.exponents
+    Y, X, _ = model.simulate(theta, U, starts)
+    for begin, end in zip(starts[:-1], starts[1:]):
+        x = np.zeros(3)
+        for t in range(begin, end):
+            s = np.r_[x, U[t]][None]
+            expected = (values["C"] @ x + values["D"] @ U[t]
+                        + values["F"] @ evaluate_monomials(s, exponents[1])[0])
+            np.testing.assert_allclose(Y[t], expected, rtol=1e-12, atol=1e-12)
+            x = (values["A"] @ x + values["B"] @ U[t]
+                 + values["E"] @ evaluate_monomials(s, exponents[0])[0])
+
+
+def test_divergence_rule_on_states_and_outputs():
+    n_u = 1
+    model = StateSpaceModel(2, n_u, 1)
+    theta = model.pack({"A": 1.5 * np.eye(2), "B": np.ones((2, 1)), "C": np.ones((1, 2)),
+                        "D": np.zeros((1, 1))})
+    U = np.ones((200, 1))
+    starts = np.array([0, 100, 200])
+    Y, X, diverged = model.simulate(theta, U, starts)
+    assert diverged
+    assert np.all(np.isfinite(Y[:5])) and np.isnan(Y[99]) and np.isnan(X[199, 0])
+    first = np.flatnonzero(np.isnan(Y[:100, 0]))[0]
+    assert np.all(np.abs(X[first - 1]) <= DIVERGENCE_BOUND)
+    assert model.sensitivities(theta, U, starts, np.arange(200))[3]
+    # An output that leaves the bound at the last sample (the state stays
+    # bounded) is divergence as well.
+    feedthrough = model.pack({"A": np.zeros((2, 2)), "B": np.zeros((2, 1)),
+                              "C": np.zeros((1, 2)), "D": np.ones((1, 1))})
+    U_last = np.ones((10, 1))
+    U_last[-1] = 10 * DIVERGENCE_BOUND
+    Y, _, diverged = model.simulate(feedthrough, U_last, np.array([0, 10]))
+    assert diverged and np.isnan(Y[-1, 0]) and np.all(np.isfinite(Y[:-1]))
+
+
+def _problem(terms="polynomial", estimate_x0=True, period=None, **options):
+    model, theta = _model(terms, DIMS["SISO"], estimate_x0, seed=7)
+    period_length = 16
+    U = 0.5 * np.random.default_rng(8).standard_normal((3 * period_length, 1))
+    starts = np.array([0, 3 * period_length])
+    index, sim_starts, original = steady_state_rows(starts, period_length)
+    Y = model.simulate(theta, U[index], sim_starts)[0][original]
+    Y = Y + 0.01 * np.random.default_rng(9).standard_normal(Y.shape)
+    rows = fit_rows(U, Y, starts, n_transient=period_length, validation_fraction=0.0,
+                    steady_state_period=period_length)
+    problem = SimulationErrorProblem(model, rows, frequency_period=period and period_length,
+                                     **options)
+    return problem, theta
+
+
+# Factors on A that make these test models locally expanding (spectral radius
+# of the local map above 1 at some samples) without diverging.
+_EXPANDING = {"polynomial": 1.4, "network-tanh": 1.45, "branches-powers": 1.45}
+
+
+@pytest.mark.parametrize("terms", list(_EXPANDING))
+@pytest.mark.parametrize("options", [
+    {"period": True}, {"stability_penalty": 1.0}, {"weight_decay": 0.3},
+    {"period": True, "weight_decay": 0.1},
+], ids=["frequency", "stability", "decay", "frequency+decay"])
+def test_problem_jacobian_matches_central_differences(terms, options):
+    problem, theta = _problem(terms, **options)
+    if "stability_penalty" in options:
+        # A locally expanding map at some samples, so that the penalty acts.
+        theta[problem.model.columns("A")] *= _EXPANDING[terms]
+        theta[problem.model.columns("B", "C")] *= 0.1
+    r, J = problem.residual(theta, True)
+    assert r is not None
+    assert r.size > problem.fit_rows.sum()
+    J_fd = central_differences(lambda th: problem.residual(th, False)[0], theta)
+    if "stability_penalty" in options:
+        # Exact in A and the terms' parameters: the states' own dependence is
+        # left out (Gauss-Newton).
+        data_rows = problem.fit_rows.sum()
+        J, J_fd = J[:data_rows], J_fd[:data_rows]
+    np.testing.assert_allclose(J, J_fd, rtol=1e-5, atol=1e-6 * np.abs(J_fd).max())
+
+
+def test_stability_penalty_rows_direct_dependence():
+    problem, theta = _problem(stability_penalty=1.0)
+    model = problem.model
+    theta[model.columns("A")] *= _EXPANDING["polynomial"]
+    theta[model.columns("B", "C")] *= 0.1
+    X = problem.simulate(theta)[1]
+    r, J = problem._stability_rows(theta, X, problem.fit_rows.sum(), True)
+    assert np.any(r > 0)
+    columns = np.r_[model.columns("A"), model.terms_columns[: model.terms.n_state_params]]
+    J_fd = central_differences(
+        lambda th: problem._stability_rows(th, X, problem.fit_rows.sum(), False)[0], theta)
+    np.testing.assert_allclose(J[:, columns], J_fd[:, columns], rtol=1e-5,
+                               atol=1e-6 * np.abs(J_fd).max())
+
+
+def test_spectral_radius_gradient():
+    J = np.random.default_rng(0).standard_normal((30, 3, 3))
+    radius, gradient = spectral_radius(J)
+    np.testing.assert_allclose(radius, np.abs(np.linalg.eigvals(J)).max(axis=1))
+    for i, j in [(0, 0), (1, 2)]:
+        step = np.zeros((3, 3))
+        step[i, j] = 1e-7
+        fd = (spectral_radius(J + step)[0] - spectral_radius(J - step)[0]) / 2e-7
+        np.testing.assert_allclose(gradient[:, i, j], fd, rtol=1e-5, atol=1e-7)
+
+
+def test_restricted_problem():
+    problem, theta = _problem()
+    free = problem.model.linear_columns
+    restricted = problem.restricted(theta, free)
+    r_full, J_full = problem.residual(theta, True)
+    r, J = restricted.residual(theta[free], True)
+    np.testing.assert_array_equal(r, r_full)
+    np.testing.assert_array_equal(J, J_full[:, free])
+    assert restricted.validation_loss is None
+
+
+def test_fit_from_skips_candidates_that_diverge():
+    problem, theta = _problem()
+    exploding = theta.copy()
+    exploding[problem.model.columns("A")] = (3.0 * np.eye(2)).ravel()
+    _, result = fit_from(problem, [exploding, theta], label="test", max_iter=3)
+    assert result.loss_history[0] == pytest.approx(
+        np.mean(problem.residual(theta, False)[0] ** 2))
+    with pytest.raises(ValueError, match="no starting point"):
+        fit_from(problem, [exploding], label="test", max_iter=3)
+
+
+def _start(loss, fail=False):
+    if fail:
+        raise ValueError("a start that fails")
+    return None, LMResult(np.zeros(1), np.array([loss]), None, 0, 0, True)
+
+
+def test_run_starts_ranks_and_survives_failures():
+    outcomes, best = run_starts(_start, [(3.0,), (1.0,), (2.0, True), (1.0,)])
+    assert best == 1
+    assert isinstance(outcomes[2], ValueError)
+    assert run_starts(_start, [(1.0, True)])[1] is None
+
+
+def test_linear_part_refined_alone_recovers_a_perturbed_model():
+    rng = np.random.default_rng(5)
+    A = np.array([[0.7, 0.2], [-0.2, 0.5]])
+    B, C, D = np.array([[1.0], [0.5]]), np.array([[1.0, -0.5]]), np.array([[0.1]])
+    model = StateSpaceModel(2, 1, 1, NetworkTerms(2, 1, 1, 2, "tanh"), estimate_x0=True)
+    values = {name: np.zeros(shape) for name, shape in model.blocks}
+    truth = model.pack(dict(values, A=A, B=B, C=C, D=D, x0=np.array([0.5, -0.3])))
+    U = rng.standard_normal((300, 1))
+    starts = np.array([0, 300])
+    Y = model.simulate(truth, U, starts)[0]
+    rows = fit_rows(U, Y, starts, n_transient=0, validation_fraction=0.0)
+    problem = SimulationErrorProblem(model, rows)
+    theta = model.pack(dict(values, A=A + 0.05, B=1.1 * B, C=0.9 * C, D=D + 0.05))
+    free = model.linear_columns
+    refined = theta.copy()
+    refined[free] = fit_from(problem.restricted(theta, free), [theta[free]], label="linear",
+                             max_iter=100, tol=1e-14, n_drop=4)[0]
+    fitted = model.unpack(refined)
+    # The same input-output behaviour (equal Markov parameters); the terms stay 0.
+    markov = [C @ np.linalg.matrix_power(A, k) @ B for k in range(5)]
+    refined_markov = [fitted["C"] @ np.linalg.matrix_power(fitted["A"], k) @ fitted["B"]
+                      for k in range(5)]
+    np.testing.assert_allclose(refined_markov, markov, atol=1e-6)
+    np.testing.assert_allclose(fitted["D"], D, atol=1e-6)
+    np.testing.assert_array_equal(refined[model.terms_columns], 0.0)
