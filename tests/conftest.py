@@ -25,3 +25,11 @@ def cascaded_tanks():
     from sknlss.datasets import fetch_cascaded_tanks
 
     return _load_or_skip(fetch_cascaded_tanks, "Cascaded Tanks")
+
+
+@pytest.fixture(scope="session")
+def silverbox():
+    """The real Silverbox records."""
+    from sknlss.datasets import fetch_silverbox
+
+    return _load_or_skip(fetch_silverbox, "Silverbox")

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sknlss.datasets import (fetch_cascaded_tanks, load_cascaded_tanks, make_cascaded_tanks,
-                             make_pnlss_reference)
-from sknlss.datasets import _cascaded_tanks, _fetch
+from sknlss.datasets import (fetch_cascaded_tanks, fetch_silverbox, load_cascaded_tanks,
+                             make_cascaded_tanks, make_pnlss_reference)
+from sknlss.datasets import _cascaded_tanks, _fetch, _silverbox
 
 
 @pytest.fixture(autouse=True)
@@ -268,6 +268,7 @@ def test_alias_passes_download_through(tmp_path, empty_environment):
 
 @pytest.mark.parametrize("loader, kwargs, name", [
     (fetch_cascaded_tanks, {"download_if_missing": "no"}, "download_if_missing"),
+    (fetch_silverbox, {"download_if_missing": 1}, "download_if_missing"),
     (fetch_cascaded_tanks, {"data_home": 3}, "data_home"),
     (load_cascaded_tanks, {"download": "no"}, "download"),
 ])
@@ -276,7 +277,75 @@ def test_loader_arguments_are_validated(loader, kwargs, name):
         loader(**kwargs)
 
 
-# ---------------------------------------------------------- simulated tanks
+# -------------------------------------------------------------- Silverbox
+@pytest.mark.realdata
+def test_fetch_silverbox_records(silverbox):
+    data = silverbox
+    assert data.X_est.shape == (65062, 1) and data.y_est.shape == (65062,)
+    assert list(data.tests) == ["multisine", "arrow", "arrow_full"]
+    lengths = {"multisine": 21688, "arrow": 32000, "arrow_full": 40475}
+    for name, record in data.tests.items():
+        assert record.X.shape == (lengths[name], 1) and record.y.shape == (lengths[name],)
+    assert data.X_test is data.tests["multisine"].X
+    assert data.y_test is data.tests["multisine"].y
+    assert data.sampling_time == 2**14 / 1e7
+    assert data.init_window == 50 and data.output_unit == "V"
+    assert "Silverbox" in data.DESCR and data.filename.endswith("SNLS80mV.mat")
+    np.testing.assert_allclose(data.X_est[:2, 0], [-0.0145043307, 0.0206038614], atol=1e-10)
+    np.testing.assert_allclose(data.y_est[:2], [0.0364508525, -0.0400935856], atol=1e-10)
+    # The arrow without extrapolation is the start of the full arrow (both
+    # begin at sample 100), and only the full arrow goes beyond the
+    # estimation amplitude.
+    full, arrow = data.tests["arrow_full"], data.tests["arrow"]
+    np.testing.assert_array_equal(full.X[:32000], arrow.X)
+    assert np.abs(arrow.X).max() < np.abs(data.X_est).max() < np.abs(full.X).max()
+
+
+@pytest.mark.realdata
+def test_silverbox_excited_band(silverbox):
+    # One 8192-sample multisine period of the estimation record (it starts at
+    # sample 344): its power lies on the odd lines 1 to 2683, the stated band.
+    period = silverbox.X_est[344:344 + 8192, 0]
+    power = np.abs(np.fft.rfft(period)) ** 2
+    assert power[1:2684:2].sum() > 0.999 * power[1:].sum()
+    assert power[2683] > 100 * np.median(power[2685:])
+    resolution = 1 / (8192 * silverbox.sampling_time)
+    np.testing.assert_allclose(silverbox.excited_band, (resolution, 2683 * resolution))
+    np.testing.assert_allclose(silverbox.excited_band, (0.0745, 199.9), atol=1e-3)
+
+
+def test_truncated_silverbox_copy_is_rejected(tmp_path, empty_environment):
+    folder = tmp_path / "silverbox"
+    folder.mkdir()
+    truncated = folder / "SNLS80mV.mat"
+    truncated.write_bytes(b"MATLAB 5.0 MAT-file" + bytes(1000))
+    with pytest.raises(ValueError, match="not the official Silverbox file") as info:
+        fetch_silverbox(tmp_path)
+    assert str(truncated) in str(info.value)
+    assert _silverbox.SILVERBOX.files["SNLS80mV.mat"] in str(info.value)
+
+
+def test_silverbox_missing_message(tmp_path, empty_environment):
+    with pytest.raises(FileNotFoundError) as info:
+        fetch_silverbox(tmp_path, download_if_missing=False)
+    for expected in ("SNLS80mV.mat", "SilverboxFiles.zip", str(tmp_path / "silverbox")):
+        assert expected in str(info.value)
+
+
+@pytest.mark.realdata
+def test_silverbox_download_extracts_and_caches(silverbox, tmp_path, empty_environment,
+                                               monkeypatch):
+    payload = _zip_bytes({"SilverboxFiles/README.txt": b"readme",
+                          "SilverboxFiles/SNLS80mV.mat": Path(silverbox.filename).read_bytes()})
+    _trust_archive(monkeypatch, _silverbox, "SILVERBOX", payload)
+    requested = _serve(monkeypatch, payload)
+    data = fetch_silverbox(tmp_path / "empty")
+    assert requested == [_silverbox.SILVERBOX.archive_url]
+    assert data.filename == str(tmp_path / "cache" / "sknlss" / "silverbox" / "SNLS80mV.mat")
+    np.testing.assert_array_equal(data.y_est, silverbox.y_est)
+
+
+# ------------------------------------------------------- simulated tanks
 def test_make_cascaded_tanks_shapes_and_ranges():
     data = make_cascaded_tanks(random_state=0)
     assert data.X_est.shape == data.X_test.shape == (1024, 1)
