@@ -352,6 +352,8 @@ def test_make_cascaded_tanks_shapes_and_ranges():
     assert data.y_est.shape == data.y_test.shape == (1024,)
     assert data.states_est.shape == (1024, 2)
     assert data.sampling_time == 4.0
+    assert data.noise_std == 0.02 and data.init_window == 50
+    assert "k1 sqrt(x1)" in data.DESCR
     for X, y, states in ((data.X_est, data.y_est, data.states_est),
                          (data.X_test, data.y_test, data.states_test)):
         assert np.all(X >= 0)
@@ -403,13 +405,19 @@ def test_make_cascaded_tanks_rk4_converges():
     "kwargs, match",
     [
         ({"n_samples": 2}, "n_samples"),
+        ({"n_samples": 100.0}, "n_samples"),
+        ({"sampling_time": np.inf}, "sampling_time"),
+        ({"sampling_time": 0.0}, "sampling_time"),
+        ({"n_substeps": 0}, "n_substeps"),
         ({"input": (np.ones(10), np.ones(10))}, "input must be a pair"),
         ({"input": (np.ones(1024), np.full(1024, np.nan))}, "finite"),
         ({"measurement_noise": -1.0}, "measurement_noise"),
+        ({"process_noise": np.nan}, "process_noise"),
         ({"overflow": (10.0,)}, "overflow"),
         ({"k": (0.05, 0.05, 0.05)}, "k must be"),
         ({"x0": (1.0, -1.0)}, "x0"),
         ({"overflow_fraction": 2.0}, "overflow_fraction"),
+        ({"random_state": "seed"}, "random_state"),
     ],
 )
 def test_make_cascaded_tanks_bad_arguments(kwargs, match):
@@ -479,3 +487,14 @@ def test_pnlss_reference_is_fast():
     start = time.perf_counter()
     make_pnlss_reference(n_realizations=4, n_periods=4)
     assert time.perf_counter() - start < 0.1
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"n_periods": 0}, "n_periods"),
+    ({"n_realizations": 1.5}, "n_realizations"),
+    ({"n_samples_per_period": 4}, "n_samples_per_period"),
+    ({"noise": "yes"}, "noise"),
+])
+def test_pnlss_reference_bad_arguments(kwargs, name):
+    with pytest.raises(ValueError, match=f"'{name}' parameter"):
+        make_pnlss_reference(**kwargs)

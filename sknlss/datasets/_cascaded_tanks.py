@@ -7,7 +7,7 @@ import numpy as np
 from numba import njit
 from scipy.io import loadmat
 from sklearn.utils import Bunch, check_random_state
-from sklearn.utils._param_validation import validate_params
+from sklearn.utils._param_validation import Interval, validate_params
 
 from ..signals import multisine
 from ._fetch import RemoteDataset, fetch_file
@@ -65,6 +65,22 @@ when the upper tank overflows.
   to set the state and computes the RMS error on the rest.
 
 Data: 4TU.ResearchData, doi:10.4121/12960104, licence CC BY-SA 4.0.
+"""
+
+
+_SIMULATION_DESCR = """\
+Simulated Cascaded Tanks
+------------------------
+
+dx1/dt = -k1 sqrt(x1) + k4 u + w1,  dx2/dt = k2 sqrt(x1) - k3 sqrt(x2) + w2,
+y = x2 + e, with (k1, k2, k3, k4) = {k}; the tanks overflow at {overflow}
+(hard saturation), a random part (mean {fraction}) of the upper tank's overflow
+falling into the lower one. Process noise: level change of standard deviation
+{process} V per sample; measurement noise e: white Gaussian, standard deviation
+{measurement} V. Fourth-order Runge-Kutta, {n_substeps} steps per sample,
+sampling time {sampling_time} s, zero-order-held input. Both records start
+from the levels {x0}. Input: {input}.
+The first init_window = 50 test samples may be used to set the initial state.
 """
 
 
@@ -268,11 +284,22 @@ def _benchmark_like_input(n_samples, sampling_time, rng):
     return np.maximum(2.8 + u[0], 0.0)
 
 
-def _check_nonnegative(name, value):
-    if not isinstance(value, Real) or not np.isfinite(value) or value < 0:
-        raise ValueError(f"{name} must be a non-negative finite number, got {value!r}.")
-
-
+@validate_params(
+    {
+        "n_samples": [Interval(Integral, 3, None, closed="left")],
+        "input": ["array-like", None],
+        "sampling_time": [Interval(Real, 0, np.inf, closed="neither")],
+        "process_noise": [Interval(Real, 0, np.inf, closed="left")],
+        "measurement_noise": [Interval(Real, 0, np.inf, closed="left")],
+        "overflow": ["array-like"],
+        "overflow_fraction": [Interval(Real, 0, 1, closed="both")],
+        "k": ["array-like"],
+        "x0": ["array-like", None],
+        "n_substeps": [Interval(Integral, 1, None, closed="left")],
+        "random_state": ["random_state"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
                         process_noise=0.01, measurement_noise=0.02,
                         overflow=(10.0, 10.0), overflow_fraction=0.5,
@@ -342,6 +369,13 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
             True levels (x1, x2) at the sampling instants.
         sampling_time : float
             Sampling time in seconds.
+        noise_std : float
+            Standard deviation of the measurement noise, ``measurement_noise``.
+        init_window : int
+            Samples at the start of the test record that may be used to set
+            the initial state, as in the benchmark (50).
+        DESCR : str
+            Equations and the parameter values used.
 
     See Also
     --------
@@ -356,18 +390,6 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
     >>> bool(data.y_est.max() <= 10.1)
     True
     """
-    if not isinstance(n_samples, Integral) or isinstance(n_samples, bool) or n_samples < 3:
-        raise ValueError(f"n_samples must be an integer >= 3, got {n_samples!r}.")
-    if not isinstance(n_substeps, Integral) or n_substeps < 1:
-        raise ValueError(f"n_substeps must be a positive integer, got {n_substeps!r}.")
-    if not isinstance(sampling_time, Real) or not sampling_time > 0:
-        raise ValueError(f"sampling_time must be positive, got {sampling_time!r}.")
-    _check_nonnegative("process_noise", process_noise)
-    _check_nonnegative("measurement_noise", measurement_noise)
-    if not 0.0 <= overflow_fraction <= 1.0:
-        raise ValueError(
-            f"overflow_fraction must be in [0, 1], got {overflow_fraction!r}."
-        )
     overflow = np.asarray(overflow, dtype=np.float64)
     constants = np.asarray(k, dtype=np.float64)
     if overflow.shape != (2,) or np.any(overflow <= 0) or np.any(np.isnan(overflow)):
@@ -404,8 +426,18 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
         y = states[:, 1] + measurement_noise * rng.standard_normal(n_samples)
         records.append((u.reshape(-1, 1), y, states))
     (X_est, y_est, states_est), (X_test, y_test, states_test) = records
+    descr = _SIMULATION_DESCR.format(
+        k=constants, overflow=overflow, fraction=overflow_fraction,
+        process=process_noise, measurement=measurement_noise, x0=x0,
+        sampling_time=sampling_time, n_substeps=n_substeps,
+        input="the given arrays" if input is not None else (
+            "two realisations of a low-pass multisine like the benchmark's (0 to "
+            "0.0144 Hz, mean 2.8 V, RMS 1 V about the mean, the lowest third of the "
+            "band ten times stronger, negative values clipped to 0)"),
+    )
     return Bunch(
         X_est=X_est, y_est=y_est, X_test=X_test, y_test=y_test,
         states_est=states_est, states_test=states_test,
-        sampling_time=float(sampling_time),
+        sampling_time=float(sampling_time), noise_std=float(measurement_noise),
+        init_window=_INIT_WINDOW, DESCR=descr,
     )
