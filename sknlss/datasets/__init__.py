@@ -1,24 +1,41 @@
 """Benchmark data and simulated data sets.
 
+Measured benchmarks (read from a data folder, downloaded where a network is
+available, checked by SHA-256):
+
 fetch_cascaded_tanks
-    The measured Cascaded Tanks benchmark records (``load_cascaded_tanks`` is
-    an alias).
+    The Cascaded Tanks records (``load_cascaded_tanks`` is an alias).
 fetch_silverbox
-    The measured Silverbox benchmark records: estimation and three test records.
+    The Silverbox records: estimation and three test records.
+
+Simulated systems (each with estimation and test records, a stated noise
+level and a test input that leaves the estimation amplitude):
+
 make_cascaded_tanks
-    Simulated records of the two-tank system, with overflow and noise.
+    The two-tank system, with overflow and noise.
+make_wiener_hammerstein
+    Linear filter, soft saturation, linear filter.
+make_duffing
+    A Duffing oscillator like the Silverbox.
+make_bouc_wen
+    The hysteretic Bouc-Wen oscillator of the Noël-Schoukens benchmark.
 make_pnlss_reference
     Steady-state multisine data of the reference PNLSS system.
 """
 
 from ._cascaded_tanks import fetch_cascaded_tanks, load_cascaded_tanks, make_cascaded_tanks
+from ._oscillators import make_bouc_wen, make_duffing
 from ._pnlss_reference import make_pnlss_reference
 from ._silverbox import fetch_silverbox
+from ._wiener_hammerstein import make_wiener_hammerstein
 
 __all__ = [
     "fetch_cascaded_tanks",
     "fetch_silverbox",
     "load_cascaded_tanks",
+    "make_bouc_wen",
     "make_cascaded_tanks",
+    "make_duffing",
     "make_pnlss_reference",
+    "make_wiener_hammerstein",
 ]
