@@ -7,14 +7,16 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from sknlss.datasets import make_bouc_wen, make_duffing, make_wiener_hammerstein
+from sknlss.datasets import (make_bouc_wen, make_closed_loop_drive, make_duffing,
+                             make_wiener_hammerstein)
 
-GENERATORS = [make_wiener_hammerstein, make_duffing, make_bouc_wen]
+GENERATORS = [make_wiener_hammerstein, make_duffing, make_bouc_wen, make_closed_loop_drive]
+OPEN_LOOP = [make_wiener_hammerstein, make_duffing, make_bouc_wen]
 SMALL = {"n_samples": 1024, "n_test_samples": 512}
 
 # The input argument that sets the estimation amplitude.
 AMPLITUDE = {make_wiener_hammerstein: "input_rms", make_duffing: "input_rms",
-             make_bouc_wen: "input_rms"}
+             make_bouc_wen: "input_rms", make_closed_loop_drive: "reference_rms"}
 
 
 def _ids(functions):
@@ -68,9 +70,12 @@ def test_noise_level_is_the_stated_one(make):
     clean = make(random_state=1, noise_std=0.0)
     np.testing.assert_array_equal(noisy.X_est, clean.X_est)
     np.testing.assert_array_equal(noisy.X_test, clean.X_test)
+    # The drive's controller feeds the measurement noise back, so the position
+    # itself moves with it a little.
+    tolerance = 0.1 if make is make_closed_loop_drive else 0.05
     for record in ("est", "test"):
         noise = noisy[f"y_{record}"] - clean[f"y_{record}"]
-        assert noise.std() == pytest.approx(noisy.noise_std, rel=0.05)
+        assert noise.std() == pytest.approx(noisy.noise_std, rel=tolerance)
 
 
 @pytest.mark.parametrize("make", GENERATORS, ids=_ids(GENERATORS))
@@ -80,7 +85,7 @@ def test_a_linear_model_leaves_more_than_the_noise(make):
     assert error > 5 * make(random_state=2).noise_std
 
 
-@pytest.mark.parametrize("make", GENERATORS, ids=_ids(GENERATORS))
+@pytest.mark.parametrize("make", OPEN_LOOP, ids=_ids(OPEN_LOOP))
 def test_nearly_linear_at_small_amplitude(make):
     # The nonlinearity is the system's, not the ARX structure's: with an input
     # a thousand times smaller the relative error of the linear fit collapses.
@@ -93,11 +98,19 @@ def test_nearly_linear_at_small_amplitude(make):
     assert relative[1] < relative[0] / 10
 
 
-@pytest.mark.parametrize("make", GENERATORS, ids=_ids(GENERATORS))
+@pytest.mark.parametrize("make", OPEN_LOOP, ids=_ids(OPEN_LOOP))
 def test_test_input_leaves_the_estimation_amplitude_at_its_end(make):
     data = make(random_state=0)
     n_end = data.X_test.shape[0] // 10
     assert data.X_test[-n_end:].std() > 1.25 * data.X_est.std()
+
+
+def test_drive_test_reference_leaves_the_estimation_range_at_its_end():
+    for seed in range(3):
+        data = make_closed_loop_drive(random_state=seed)
+        reach = data.X_est.max() + 0.25 * np.ptp(data.X_est)
+        assert data.X_test[-1, 0] >= reach - 1e-12
+        assert data.y_test[-200:].max() > data.X_est.max()
 
 
 @pytest.mark.parametrize("make", GENERATORS, ids=_ids(GENERATORS))
@@ -116,12 +129,14 @@ def test_fast(make):
     assert time.perf_counter() - start < 0.3
 
 
-@pytest.mark.parametrize("make", [make_duffing, make_bouc_wen], ids=["duffing", "bouc_wen"])
-def test_integration_is_accurate(make):
+@pytest.mark.parametrize("make, scale", [(make_duffing, 0.1), (make_bouc_wen, 0.1),
+                                         (make_closed_loop_drive, 0.1)],
+                         ids=["duffing", "bouc_wen", "closed_loop_drive"])
+def test_integration_is_accurate(make, scale):
     default, fine = (make(**SMALL, random_state=0, noise_std=0.0, n_substeps=m)
                      for m in (20, 80))
     difference = np.abs(default.y_est - fine.y_est).max()
-    assert difference < 0.1 * make(**SMALL).noise_std
+    assert difference < scale * make(**SMALL).noise_std
 
 
 def test_duffing_is_periodic_in_steady_state():
@@ -143,6 +158,17 @@ def test_bouc_wen_matches_the_benchmark_scale():
     assert data.sampling_time == 1 / 750 and data.excited_band == (5.0, 150.0)
 
 
+def test_closed_loop_drive_tracks_its_reference():
+    data = make_closed_loop_drive(random_state=0)
+    assert data.u_plant_est.shape == (6000,) and data.u_plant_test.shape == (3000,)
+    for X, y in ((data.X_est, data.y_est), (data.X_test, data.y_test)):
+        error = X[:, 0] - y
+        assert np.abs(error).max() < 0.1 * np.ptp(X)
+        assert np.corrcoef(X[:, 0], y)[0, 1] > 0.99
+    # A force a linear motor can deliver.
+    assert 5.0 < np.abs(data.u_plant_est).max() < 200.0
+
+
 def _bad_arguments():
     cases = []
     for make in GENERATORS:
@@ -159,6 +185,8 @@ def _bad_arguments():
         (make_duffing, {"sampling_time": 0.01}, "sampling_time=0.01 is too long"),
         (make_bouc_wen, {"sampling_time": 0.01}, "sampling_time=0.01 is too long"),
         (make_duffing, {"n_substeps": 0}, "'n_substeps' parameter"),
+        (make_closed_loop_drive, {"sampling_time": 0.02}, "'sampling_time' parameter"),
+        (make_closed_loop_drive, {"n_substeps": 5}, "n_substeps >= 20"),
     ]
     return cases
 

@@ -19,11 +19,14 @@ make_duffing
     A Duffing oscillator like the Silverbox.
 make_bouc_wen
     The hysteretic Bouc-Wen oscillator of the Noël-Schoukens benchmark.
+make_closed_loop_drive
+    A positioning drive with friction under PID control, in closed loop.
 make_pnlss_reference
     Steady-state multisine data of the reference PNLSS system.
 """
 
 from ._cascaded_tanks import fetch_cascaded_tanks, load_cascaded_tanks, make_cascaded_tanks
+from ._closed_loop_drive import make_closed_loop_drive
 from ._oscillators import make_bouc_wen, make_duffing
 from ._pnlss_reference import make_pnlss_reference
 from ._silverbox import fetch_silverbox
@@ -35,6 +38,7 @@ __all__ = [
     "load_cascaded_tanks",
     "make_bouc_wen",
     "make_cascaded_tanks",
+    "make_closed_loop_drive",
     "make_duffing",
     "make_pnlss_reference",
     "make_wiener_hammerstein",
