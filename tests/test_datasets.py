@@ -1,21 +1,27 @@
+import dataclasses
+import hashlib
+import io
 import shutil
 import time
+import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sknlss.datasets import load_cascaded_tanks, make_cascaded_tanks, make_pnlss_reference
-from sknlss.datasets import _cascaded_tanks
+from sknlss.datasets import (fetch_cascaded_tanks, fetch_silverbox, load_cascaded_tanks,
+                             make_cascaded_tanks, make_pnlss_reference)
+from sknlss.datasets import _cascaded_tanks, _fetch, _silverbox
 
 
-@pytest.fixture
+@pytest.fixture(autouse=True)
 def no_network(monkeypatch):
-    """Fail the test if the loader tries to download anything."""
+    """Fail any test that reaches the real downloader."""
 
-    def refuse(destination):
+    def refuse():
         raise AssertionError("the test tried to download")
 
-    monkeypatch.setattr(_cascaded_tanks, "_download", refuse)
+    monkeypatch.setattr(_fetch, "_downloader", refuse)
 
 
 @pytest.fixture
@@ -24,13 +30,54 @@ def empty_environment(monkeypatch, tmp_path):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
 
 
-# ---------------------------------------------------------------- real data
+def _zip_bytes(members):
+    archive = io.BytesIO()
+    with zipfile.ZipFile(archive, "w") as zipped:
+        for name, content in members.items():
+            zipped.writestr(name, content)
+    return archive.getvalue()
+
+
+def _serve(monkeypatch, payload):
+    """Make downloads write ``payload``; returns the list of requested addresses."""
+    requested = []
+
+    def downloader(url, output_file, pooch):
+        requested.append(url)
+        Path(output_file).write_bytes(payload)
+
+    monkeypatch.setattr(_fetch, "_downloader", lambda: downloader)
+    return requested
+
+
+def _trust_archive(monkeypatch, module, name, payload):
+    """Record the SHA-256 of ``payload`` as the archive's, as for an official one."""
+    dataset = getattr(module, name)
+    digest = hashlib.sha256(payload).hexdigest()
+    monkeypatch.setattr(module, name, dataclasses.replace(dataset, archive_sha256=digest))
+
+
+def _files(folder):
+    return sorted(path.name for path in Path(folder).rglob("*") if path.is_file())
+
+
+def _shared_file(data, name):
+    path = Path(data.filename).with_name(name)
+    if not path.is_file():
+        pytest.skip(f"needs {name} beside {data.filename}")
+    return path
+
+
+# -------------------------------------------------------- Cascaded Tanks
 @pytest.mark.realdata
-def test_load_cascaded_tanks_records(cascaded_tanks):
+def test_fetch_cascaded_tanks_records(cascaded_tanks):
     data = cascaded_tanks
     assert data.X_est.shape == (1024, 1) and data.X_test.shape == (1024, 1)
     assert data.y_est.shape == (1024,) and data.y_test.shape == (1024,)
     assert data.sampling_time == 4.0
+    assert data.init_window == 50
+    assert data.excited_band == (0.0, 0.0144)
+    assert data.output_unit == "V"
     # First values as recorded in the data's SOURCE.md.
     np.testing.assert_allclose(data.X_est[:2, 0], [3.25672305, 3.24655232], atol=5e-9)
     np.testing.assert_allclose(data.y_est[:2], [5.20500496, 5.21538109], atol=5e-9)
@@ -41,92 +88,272 @@ def test_load_cascaded_tanks_records(cascaded_tanks):
 
 
 @pytest.mark.realdata
-def test_mat_and_csv_agree(cascaded_tanks, tmp_path, empty_environment, no_network):
+def test_cascaded_tanks_input_band(cascaded_tanks):
+    # The benchmark's input has no power above the stated upper band edge.
+    for X in (cascaded_tanks.X_est, cascaded_tanks.X_test):
+        spectrum = np.abs(np.fft.rfft(X[:, 0] - X[:, 0].mean())) ** 2
+        frequencies = np.fft.rfftfreq(1024, cascaded_tanks.sampling_time)
+        above = frequencies > cascaded_tanks.excited_band[1] + 1 / 4096
+        assert spectrum[above].sum() < 1e-3 * spectrum.sum()
+
+
+@pytest.mark.realdata
+def test_mat_and_csv_agree(cascaded_tanks, tmp_path, empty_environment):
     folder = tmp_path / "data"
     folder.mkdir()
-    source = _find_source(cascaded_tanks.filename)
-    shutil.copy(source.with_name("dataBenchmark_from_mat.csv"), folder)
-    from_csv = load_cascaded_tanks(folder)
-    shutil.copy(source.with_name("dataBenchmark.mat"), folder)
-    from_mat = load_cascaded_tanks(folder)
+    shutil.copy(_shared_file(cascaded_tanks, "dataBenchmark_from_mat.csv"), folder)
+    from_csv = fetch_cascaded_tanks(folder)
+    shutil.copy(_shared_file(cascaded_tanks, "dataBenchmark.mat"), folder)
+    from_mat = fetch_cascaded_tanks(folder)
     assert from_mat.filename.endswith(".mat") and from_csv.filename.endswith(".csv")
     for key in ("X_est", "y_est", "X_test", "y_test"):
         np.testing.assert_array_equal(from_mat[key], from_csv[key])
 
 
-def _find_source(filename):
-    from pathlib import Path
-
-    path = Path(filename)
-    if not path.with_name("dataBenchmark_from_mat.csv").is_file() or not path.with_name(
-        "dataBenchmark.mat"
-    ).is_file():
-        pytest.skip("needs both the .mat file and the CSV conversion")
-    return path
-
-
 @pytest.mark.realdata
-def test_bad_hash_raises(cascaded_tanks, tmp_path, empty_environment, no_network):
-    source = _find_source(cascaded_tanks.filename)
+def test_edited_copy_is_rejected(cascaded_tanks, tmp_path, empty_environment):
     folder = tmp_path / "data" / "cascaded_tanks"
     folder.mkdir(parents=True)
-    content = source.with_name("dataBenchmark_from_mat.csv").read_text()
-    # Change one digit of the first value: still a valid CSV, not the official file.
-    (folder / "dataBenchmark_from_mat.csv").write_text(content.replace("3.2567", "3.2568", 1))
-    with pytest.raises(ValueError, match="SHA-256"):
-        load_cascaded_tanks(tmp_path / "data")
+    content = _shared_file(cascaded_tanks, "dataBenchmark_from_mat.csv").read_text()
+    # One digit changed: still a valid CSV, not the official file.
+    edited = folder / "dataBenchmark_from_mat.csv"
+    edited.write_text(content.replace("3.2567", "3.2568", 1))
+    with pytest.raises(ValueError, match="SHA-256") as info:
+        fetch_cascaded_tanks(tmp_path / "data")
+    expected = _cascaded_tanks.CASCADED_TANKS.files["dataBenchmark_from_mat.csv"]
+    for text in (str(edited), hashlib.sha256(edited.read_bytes()).hexdigest(), expected):
+        assert text in str(info.value)
 
 
-def test_bad_hash_raises_without_real_data(tmp_path, empty_environment, no_network):
-    (tmp_path / "dataBenchmark.mat").write_bytes(b"not a MATLAB file")
-    with pytest.raises(ValueError, match="SHA-256"):
-        load_cascaded_tanks(tmp_path)
+def test_corrupted_file_is_rejected_with_both_hashes(tmp_path, empty_environment):
+    corrupted = tmp_path / "dataBenchmark.mat"
+    corrupted.write_bytes(b"not a MATLAB file")
+    with pytest.raises(ValueError) as info:
+        fetch_cascaded_tanks(tmp_path)
+    message = str(info.value)
+    assert str(corrupted) in message
+    assert hashlib.sha256(b"not a MATLAB file").hexdigest() in message
+    assert _cascaded_tanks.CASCADED_TANKS.files["dataBenchmark.mat"] in message
 
 
-def test_missing_data_message_without_download(tmp_path, empty_environment, no_network,
-                                               monkeypatch):
+def test_missing_data_message_without_download(tmp_path, empty_environment, monkeypatch):
     monkeypatch.setenv("SKNLSS_DATA", str(tmp_path / "env"))
     with pytest.raises(FileNotFoundError) as info:
-        load_cascaded_tanks(tmp_path / "home", download=False)
+        fetch_cascaded_tanks(tmp_path / "home", download_if_missing=False)
     message = str(info.value)
     for expected in ("dataBenchmark.mat", "dataBenchmark_from_mat.csv", "SKNLSS_DATA",
                      str(tmp_path / "home" / "cascaded_tanks"), str(tmp_path / "env"),
                      str(tmp_path / "cache" / "sknlss"), "10.4121/12960104"):
         assert expected in message
+    assert "could not be downloaded" not in message
 
 
-def test_failed_download_raises_file_not_found(tmp_path, empty_environment, monkeypatch):
-    calls = []
+def test_failed_download_is_fast_and_clear(tmp_path, empty_environment, monkeypatch):
+    requested = []
 
-    def offline(destination):
-        calls.append(destination)
-        raise OSError("network unreachable")
+    def offline(url, output_file, pooch):
+        requested.append(url)
+        raise OSError("Name or service not known")
 
-    monkeypatch.setattr(_cascaded_tanks, "_download", offline)
-    with pytest.raises(FileNotFoundError, match="could not be downloaded"):
-        load_cascaded_tanks(tmp_path / "home")
-    assert calls == [tmp_path / "cache" / "sknlss" / "cascaded_tanks" / "dataBenchmark.mat"]
+    monkeypatch.setattr(_fetch, "_downloader", lambda: offline)
+    start = time.perf_counter()
+    with pytest.raises(FileNotFoundError) as info:
+        fetch_cascaded_tanks(tmp_path / "home")
+    assert time.perf_counter() - start < 1.0
+    assert requested == [_cascaded_tanks.CASCADED_TANKS.archive_url]
+    message = str(info.value)
+    assert "could not be downloaded (Name or service not known)" in message
+    assert "dataBenchmark.mat" in message and str(tmp_path / "home") in message
+    assert _files(tmp_path / "cache") == []
 
 
-def test_search_order(tmp_path, monkeypatch, no_network):
-    for name in ("home", "env", "cache/sknlss"):
-        (tmp_path / name).mkdir(parents=True)
+def test_download_of_other_bytes_is_rejected_by_the_archive_hash(
+        tmp_path, empty_environment, monkeypatch):
+    _serve(monkeypatch, _zip_bytes({"CascadedTanksFiles/dataBenchmark.mat": b"x"}))
+    with pytest.raises(FileNotFoundError, match="does not match the known hash") as info:
+        fetch_cascaded_tanks(tmp_path / "empty")
+    assert _cascaded_tanks.CASCADED_TANKS.archive_sha256 in str(info.value)
+    assert _files(tmp_path / "cache") == []
+
+
+def test_download_with_a_corrupted_member_is_rejected(tmp_path, empty_environment,
+                                                      monkeypatch):
+    payload = _zip_bytes({"CascadedTanksFiles/TanksBenchmark.pdf": b"%PDF",
+                          "CascadedTanksFiles/dataBenchmark.mat": b"corrupt"})
+    _trust_archive(monkeypatch, _cascaded_tanks, "CASCADED_TANKS", payload)
+    _serve(monkeypatch, payload)
+    with pytest.raises(FileNotFoundError, match="SHA-256") as info:
+        fetch_cascaded_tanks(tmp_path / "empty")
+    assert hashlib.sha256(b"corrupt").hexdigest() in str(info.value)
+    assert _files(tmp_path / "cache") == []
+
+
+def test_download_without_the_member_is_rejected(tmp_path, empty_environment, monkeypatch):
+    payload = _zip_bytes({"README.txt": b"no data here"})
+    _trust_archive(monkeypatch, _cascaded_tanks, "CASCADED_TANKS", payload)
+    _serve(monkeypatch, payload)
+    with pytest.raises(FileNotFoundError, match="no member CascadedTanksFiles/dataBenchmark"):
+        fetch_cascaded_tanks(tmp_path / "empty")
+
+
+def test_download_of_a_broken_archive_is_rejected(tmp_path, empty_environment, monkeypatch):
+    payload = b"<html>not a zip</html>"
+    _trust_archive(monkeypatch, _cascaded_tanks, "CASCADED_TANKS", payload)
+    _serve(monkeypatch, payload)
+    with pytest.raises(FileNotFoundError, match="not a zip file"):
+        fetch_cascaded_tanks(tmp_path / "empty")
+
+
+@pytest.mark.realdata
+def test_download_extracts_checks_and_caches(cascaded_tanks, tmp_path, empty_environment,
+                                            monkeypatch):
+    mat = _shared_file(cascaded_tanks, "dataBenchmark.mat").read_bytes()
+    payload = _zip_bytes({"CascadedTanksFiles/TanksBenchmark.pdf": b"%PDF",
+                          "CascadedTanksFiles/dataBenchmark.mat": mat})
+    _trust_archive(monkeypatch, _cascaded_tanks, "CASCADED_TANKS", payload)
+    requested = _serve(monkeypatch, payload)
+    data = fetch_cascaded_tanks(tmp_path / "empty")
+    assert requested == [_cascaded_tanks.CASCADED_TANKS.archive_url]
+    cached = tmp_path / "cache" / "sknlss" / "cascaded_tanks" / "dataBenchmark.mat"
+    assert data.filename == str(cached)
+    # Only the data file stays in the cache, not the archive.
+    assert _files(tmp_path / "cache") == ["dataBenchmark.mat"]
+    np.testing.assert_array_equal(data.y_test, cascaded_tanks.y_test)
+    # The cached copy is found afterwards without any download.
+    monkeypatch.setattr(_fetch, "_downloader", None)
+    assert fetch_cascaded_tanks(tmp_path / "empty").filename == str(cached)
+
+
+def test_search_order(tmp_path, monkeypatch):
     monkeypatch.setenv("SKNLSS_DATA", str(tmp_path / "env"))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    folders = _cascaded_tanks._search_folders(tmp_path / "home")
+    folders = _fetch.data_folders(tmp_path / "home")
     assert folders == [tmp_path / "home", tmp_path / "env", tmp_path / "cache" / "sknlss"]
-    candidates = list(_cascaded_tanks._candidates(tmp_path / "home"))
-    assert candidates[0] == tmp_path / "home" / "cascaded_tanks" / "dataBenchmark.mat"
-    assert tmp_path / "home" / "dataBenchmark_from_mat.csv" in candidates
+    candidates = list(_fetch.candidate_paths(_cascaded_tanks.CASCADED_TANKS,
+                                             tmp_path / "home"))
+    assert candidates == [
+        tmp_path / "home" / "cascaded_tanks" / "dataBenchmark.mat",
+        tmp_path / "home" / "cascaded_tanks" / "dataBenchmark_from_mat.csv",
+        tmp_path / "home" / "dataBenchmark.mat",
+        tmp_path / "home" / "dataBenchmark_from_mat.csv",
+    ]
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    assert _fetch.cache_home() == Path("~/.cache/sknlss").expanduser()
 
 
-# ---------------------------------------------------------- simulated tanks
+@pytest.mark.realdata
+def test_first_folder_holding_the_data_wins(cascaded_tanks, tmp_path, monkeypatch):
+    for name in ("home", "env"):
+        (tmp_path / name / "cascaded_tanks").mkdir(parents=True)
+        shutil.copy(_shared_file(cascaded_tanks, "dataBenchmark.mat"),
+                    tmp_path / name / "cascaded_tanks")
+    monkeypatch.setenv("SKNLSS_DATA", str(tmp_path / "env"))
+    assert fetch_cascaded_tanks(tmp_path / "home").filename.startswith(str(tmp_path / "home"))
+    assert fetch_cascaded_tanks().filename.startswith(str(tmp_path / "env"))
+
+
+@pytest.mark.realdata
+def test_load_cascaded_tanks_is_an_alias(cascaded_tanks):
+    data = load_cascaded_tanks(Path(cascaded_tanks.filename).parent, download=False)
+    assert data.keys() == cascaded_tanks.keys()
+    for key in ("X_est", "y_est", "X_test", "y_test"):
+        np.testing.assert_array_equal(data[key], cascaded_tanks[key])
+
+
+def test_alias_passes_download_through(tmp_path, empty_environment):
+    # With download=False the alias must not reach the (refusing) downloader.
+    with pytest.raises(FileNotFoundError, match="were not found"):
+        load_cascaded_tanks(tmp_path, download=False)
+
+
+@pytest.mark.parametrize("loader, kwargs, name", [
+    (fetch_cascaded_tanks, {"download_if_missing": "no"}, "download_if_missing"),
+    (fetch_silverbox, {"download_if_missing": 1}, "download_if_missing"),
+    (fetch_cascaded_tanks, {"data_home": 3}, "data_home"),
+    (load_cascaded_tanks, {"download": "no"}, "download"),
+])
+def test_loader_arguments_are_validated(loader, kwargs, name):
+    with pytest.raises((TypeError, ValueError), match=f"'{name}' parameter"):
+        loader(**kwargs)
+
+
+# -------------------------------------------------------------- Silverbox
+@pytest.mark.realdata
+def test_fetch_silverbox_records(silverbox):
+    data = silverbox
+    assert data.X_est.shape == (65062, 1) and data.y_est.shape == (65062,)
+    assert list(data.tests) == ["multisine", "arrow", "arrow_full"]
+    lengths = {"multisine": 21688, "arrow": 32000, "arrow_full": 40475}
+    for name, record in data.tests.items():
+        assert record.X.shape == (lengths[name], 1) and record.y.shape == (lengths[name],)
+    assert data.X_test is data.tests["multisine"].X
+    assert data.y_test is data.tests["multisine"].y
+    assert data.sampling_time == 2**14 / 1e7
+    assert data.init_window == 50 and data.output_unit == "V"
+    assert "Silverbox" in data.DESCR and data.filename.endswith("SNLS80mV.mat")
+    np.testing.assert_allclose(data.X_est[:2, 0], [-0.0145043307, 0.0206038614], atol=1e-10)
+    np.testing.assert_allclose(data.y_est[:2], [0.0364508525, -0.0400935856], atol=1e-10)
+    # The arrow without extrapolation is the start of the full arrow (both
+    # begin at sample 100), and only the full arrow goes beyond the
+    # estimation amplitude.
+    full, arrow = data.tests["arrow_full"], data.tests["arrow"]
+    np.testing.assert_array_equal(full.X[:32000], arrow.X)
+    assert np.abs(arrow.X).max() < np.abs(data.X_est).max() < np.abs(full.X).max()
+
+
+@pytest.mark.realdata
+def test_silverbox_excited_band(silverbox):
+    # One 8192-sample multisine period of the estimation record (it starts at
+    # sample 344): its power lies on the odd lines 1 to 2683, the stated band.
+    period = silverbox.X_est[344:344 + 8192, 0]
+    power = np.abs(np.fft.rfft(period)) ** 2
+    assert power[1:2684:2].sum() > 0.999 * power[1:].sum()
+    assert power[2683] > 100 * np.median(power[2685:])
+    resolution = 1 / (8192 * silverbox.sampling_time)
+    np.testing.assert_allclose(silverbox.excited_band, (resolution, 2683 * resolution))
+    np.testing.assert_allclose(silverbox.excited_band, (0.0745, 199.9), atol=1e-3)
+
+
+def test_truncated_silverbox_copy_is_rejected(tmp_path, empty_environment):
+    folder = tmp_path / "silverbox"
+    folder.mkdir()
+    truncated = folder / "SNLS80mV.mat"
+    truncated.write_bytes(b"MATLAB 5.0 MAT-file" + bytes(1000))
+    with pytest.raises(ValueError, match="not the official Silverbox file") as info:
+        fetch_silverbox(tmp_path)
+    assert str(truncated) in str(info.value)
+    assert _silverbox.SILVERBOX.files["SNLS80mV.mat"] in str(info.value)
+
+
+def test_silverbox_missing_message(tmp_path, empty_environment):
+    with pytest.raises(FileNotFoundError) as info:
+        fetch_silverbox(tmp_path, download_if_missing=False)
+    for expected in ("SNLS80mV.mat", "SilverboxFiles.zip", str(tmp_path / "silverbox")):
+        assert expected in str(info.value)
+
+
+@pytest.mark.realdata
+def test_silverbox_download_extracts_and_caches(silverbox, tmp_path, empty_environment,
+                                               monkeypatch):
+    payload = _zip_bytes({"SilverboxFiles/README.txt": b"readme",
+                          "SilverboxFiles/SNLS80mV.mat": Path(silverbox.filename).read_bytes()})
+    _trust_archive(monkeypatch, _silverbox, "SILVERBOX", payload)
+    requested = _serve(monkeypatch, payload)
+    data = fetch_silverbox(tmp_path / "empty")
+    assert requested == [_silverbox.SILVERBOX.archive_url]
+    assert data.filename == str(tmp_path / "cache" / "sknlss" / "silverbox" / "SNLS80mV.mat")
+    np.testing.assert_array_equal(data.y_est, silverbox.y_est)
+
+
+# ------------------------------------------------------- simulated tanks
 def test_make_cascaded_tanks_shapes_and_ranges():
     data = make_cascaded_tanks(random_state=0)
     assert data.X_est.shape == data.X_test.shape == (1024, 1)
     assert data.y_est.shape == data.y_test.shape == (1024,)
     assert data.states_est.shape == (1024, 2)
     assert data.sampling_time == 4.0
+    assert data.noise_std == 0.02 and data.init_window == 50
+    assert "k1 sqrt(x1)" in data.DESCR
     for X, y, states in ((data.X_est, data.y_est, data.states_est),
                          (data.X_test, data.y_test, data.states_test)):
         assert np.all(X >= 0)
@@ -178,13 +405,19 @@ def test_make_cascaded_tanks_rk4_converges():
     "kwargs, match",
     [
         ({"n_samples": 2}, "n_samples"),
+        ({"n_samples": 100.0}, "n_samples"),
+        ({"sampling_time": np.inf}, "sampling_time"),
+        ({"sampling_time": 0.0}, "sampling_time"),
+        ({"n_substeps": 0}, "n_substeps"),
         ({"input": (np.ones(10), np.ones(10))}, "input must be a pair"),
         ({"input": (np.ones(1024), np.full(1024, np.nan))}, "finite"),
         ({"measurement_noise": -1.0}, "measurement_noise"),
+        ({"process_noise": np.nan}, "process_noise"),
         ({"overflow": (10.0,)}, "overflow"),
         ({"k": (0.05, 0.05, 0.05)}, "k must be"),
         ({"x0": (1.0, -1.0)}, "x0"),
         ({"overflow_fraction": 2.0}, "overflow_fraction"),
+        ({"random_state": "seed"}, "random_state"),
     ],
 )
 def test_make_cascaded_tanks_bad_arguments(kwargs, match):
@@ -256,49 +489,12 @@ def test_pnlss_reference_is_fast():
     assert time.perf_counter() - start < 0.1
 
 
-def _serve_zip(monkeypatch, member_name, content):
-    """Make the loader's download read a local zip archive instead of the network."""
-    import io
-    import zipfile
-
-    archive = io.BytesIO()
-    with zipfile.ZipFile(archive, "w") as zipped:
-        zipped.writestr("CascadedTanksFiles/TanksBenchmark.pdf", b"%PDF")
-        zipped.writestr(member_name, content)
-    requested = []
-
-    def fake_urlopen(url, timeout):
-        requested.append((url, timeout))
-        return io.BytesIO(archive.getvalue())
-
-    monkeypatch.setattr(_cascaded_tanks.urllib.request, "urlopen", fake_urlopen)
-    return requested
-
-
-@pytest.mark.realdata
-def test_download_extracts_and_verifies(cascaded_tanks, tmp_path, empty_environment,
-                                        monkeypatch):
-    source = _find_source(cascaded_tanks.filename)
-    requested = _serve_zip(monkeypatch, "CascadedTanksFiles/dataBenchmark.mat",
-                           source.with_name("dataBenchmark.mat").read_bytes())
-    data = load_cascaded_tanks(tmp_path / "empty")
-    assert requested == [(_cascaded_tanks.ARCHIVE_URL, _cascaded_tanks._DOWNLOAD_TIMEOUT)]
-    cached = tmp_path / "cache" / "sknlss" / "cascaded_tanks" / "dataBenchmark.mat"
-    assert data.filename == str(cached) and cached.is_file()
-    np.testing.assert_array_equal(data.y_test, cascaded_tanks.y_test)
-    # The cached copy is found afterwards without any download.
-    monkeypatch.setattr(_cascaded_tanks, "_download", None)
-    assert load_cascaded_tanks(tmp_path / "empty").filename == str(cached)
-
-
-def test_download_with_wrong_content_is_rejected(tmp_path, empty_environment, monkeypatch):
-    _serve_zip(monkeypatch, "CascadedTanksFiles/dataBenchmark.mat", b"corrupt")
-    with pytest.raises(FileNotFoundError, match="unexpected SHA-256"):
-        load_cascaded_tanks(tmp_path / "empty")
-    assert not list((tmp_path / "cache").rglob("*.mat"))
-
-
-def test_download_of_something_else_is_rejected(tmp_path, empty_environment, monkeypatch):
-    _serve_zip(monkeypatch, "README.txt", b"no data here")
-    with pytest.raises(FileNotFoundError, match="not the expected archive"):
-        load_cascaded_tanks(tmp_path / "empty")
+@pytest.mark.parametrize("kwargs, name", [
+    ({"n_periods": 0}, "n_periods"),
+    ({"n_realizations": 1.5}, "n_realizations"),
+    ({"n_samples_per_period": 4}, "n_samples_per_period"),
+    ({"noise": "yes"}, "noise"),
+])
+def test_pnlss_reference_bad_arguments(kwargs, name):
+    with pytest.raises(ValueError, match=f"'{name}' parameter"):
+        make_pnlss_reference(**kwargs)

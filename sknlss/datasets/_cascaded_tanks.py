@@ -1,39 +1,47 @@
 """The Cascaded Tanks benchmark: loader of the measured data and a simulator."""
 
-import hashlib
-import http.client
 import os
-import shutil
-import tempfile
-import urllib.request
-import zipfile
 from numbers import Integral, Real
-from pathlib import Path
 
 import numpy as np
 from numba import njit
+from scipy.io import loadmat
 from sklearn.utils import Bunch, check_random_state
+from sklearn.utils._param_validation import Interval, validate_params
 
 from ..signals import multisine
+from ._fetch import RemoteDataset, fetch_file
 
-#: SHA-256 of the accepted data files (the publisher's MATLAB file and its
-#: full-precision CSV conversion), as recorded with the data.
-SHA256 = {
-    "dataBenchmark.mat": "cb2f88d4388be4d3f2a24c6402fba804976aac5f2e1f26cda59ea0a38d016eab",
-    "dataBenchmark_from_mat.csv": (
-        "87985f32affd221d31e5efdf3a53a8f8dbbba7f070be7a16c7810b616bca97b1"
+CASCADED_TANKS = RemoteDataset(
+    title="Cascaded Tanks",
+    subfolder="cascaded_tanks",
+    # The publisher's MATLAB file and its full-precision CSV conversion.
+    files={
+        "dataBenchmark.mat": (
+            "cb2f88d4388be4d3f2a24c6402fba804976aac5f2e1f26cda59ea0a38d016eab"
+        ),
+        "dataBenchmark_from_mat.csv": (
+            "87985f32affd221d31e5efdf3a53a8f8dbbba7f070be7a16c7810b616bca97b1"
+        ),
+    },
+    # CascadedTanksFiles.zip on 4TU.ResearchData, DOI 10.4121/12960104 (v1),
+    # 7,520,592 bytes; its SHA-256 as recorded next to the publisher's MD5
+    # f832776ed1efdca4572338f467b7baec.
+    archive_url=(
+        "https://data.4tu.nl/file/d4810b78-6cdd-48fe-8950-9bd601e5f47f/"
+        "3b697e42-01a4-4979-a370-813a456c36f5"
     ),
-}
-
-#: The official archive ``CascadedTanksFiles.zip`` of 4TU.ResearchData,
-#: DOI 10.4121/12960104 (version 1); it holds ``CascadedTanksFiles/dataBenchmark.mat``.
-ARCHIVE_URL = (
-    "https://data.4tu.nl/file/d4810b78-6cdd-48fe-8950-9bd601e5f47f/"
-    "3b697e42-01a4-4979-a370-813a456c36f5"
+    archive_name="CascadedTanksFiles.zip",
+    archive_sha256="eb0fa05851e8a7136846c2e3b61fbef87def78d0852c86ab91b02ac5db541b51",
+    member="CascadedTanksFiles/dataBenchmark.mat",
+    source="CascadedTanksFiles.zip, 4TU.ResearchData, doi:10.4121/12960104",
 )
 
-_SUBFOLDER = "cascaded_tanks"
-_DOWNLOAD_TIMEOUT = 15.0
+_SAMPLING_TIME = 4.0
+# The input is a multisine from 0 to 0.0144 Hz (benchmark description).
+_EXCITED_BAND = (0.0, 0.0144)
+# nonlinear_benchmarks 1.0.1: the first 50 test outputs may set the state.
+_INIT_WINDOW = 50
 
 _DESCR = """\
 Cascaded Tanks benchmark (Schoukens, Mattsson, Wigren, Noel, 2016)
@@ -47,57 +55,38 @@ when the upper tank overflows.
 
 - Sampling time 4 s; two records of 1024 samples: estimation (uEst, yEst) and
   test (uVal, yVal).
-- Input: low-frequency multisine, 0 to 0.0144 Hz, zero-order hold.
+- Input: low-frequency multisine, 0 to 0.0144 Hz (excited_band), zero-order
+  hold; it has no power above 0.0144 Hz.
 - The unknown initial state is the same for both records and is not a steady
   state.
 - Benchmark rule: estimate on the estimation record only; report the RMS error
-  of the simulated output on the test record (all 1024 samples). The
-  nonlinear_benchmarks protocol may use the first 50 test outputs to set the
-  state and computes the RMS error on the rest.
+  (V) of the simulated output on the test record (all 1024 samples). The
+  nonlinear_benchmarks protocol may use the first init_window = 50 test outputs
+  to set the state and computes the RMS error on the rest.
 
 Data: 4TU.ResearchData, doi:10.4121/12960104, licence CC BY-SA 4.0.
 """
 
 
-def _cache_home():
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join("~", ".cache")
-    return Path(base).expanduser() / "sknlss"
+_SIMULATION_DESCR = """\
+Simulated Cascaded Tanks
+------------------------
 
-
-def _search_folders(data_home):
-    folders = []
-    if data_home is not None:
-        folders.append(Path(data_home).expanduser())
-    if os.environ.get("SKNLSS_DATA"):
-        folders.append(Path(os.environ["SKNLSS_DATA"]).expanduser())
-    folders.append(_cache_home())
-    return folders
-
-
-def _candidates(folder):
-    for sub in (folder / _SUBFOLDER, folder):
-        for name in SHA256:
-            yield sub / name
-
-
-def _sha256(path):
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def _check_hash(path):
-    digest = _sha256(path)
-    if digest != SHA256[path.name]:
-        raise ValueError(
-            f"{path} is not the official Cascaded Tanks file: its SHA-256 is "
-            f"{digest}, expected {SHA256[path.name]}. Replace it with an intact copy."
-        )
+dx1/dt = -k1 sqrt(x1) + k4 u + w1,  dx2/dt = k2 sqrt(x1) - k3 sqrt(x2) + w2,
+y = x2 + e, with (k1, k2, k3, k4) = {k}; the tanks overflow at {overflow}
+(hard saturation), a random part (mean {fraction}) of the upper tank's overflow
+falling into the lower one. Process noise: level change of standard deviation
+{process} V per sample; measurement noise e: white Gaussian, standard deviation
+{measurement} V. Fourth-order Runge-Kutta, {n_substeps} steps per sample,
+sampling time {sampling_time} s, zero-order-held input. Both records start
+from the levels {x0}. Input: {input}.
+The first init_window = 50 test samples may be used to set the initial state.
+"""
 
 
 def _read_records(path):
     """Return uEst, yEst, uVal, yVal as 1-D float64 arrays."""
     if path.suffix == ".mat":
-        from scipy.io import loadmat
-
         content = loadmat(path)
         return tuple(
             np.asarray(content[key], dtype=np.float64).ravel()
@@ -109,53 +98,11 @@ def _read_records(path):
     return tuple(table[:, header.index(key)] for key in ("uEst", "yEst", "uVal", "yVal"))
 
 
-def _download(destination):
-    """Fetch the official archive and extract ``dataBenchmark.mat`` to ``destination``.
-
-    Raises ``OSError`` (``urllib.error.URLError`` is one) or
-    ``http.client.HTTPException`` on any failure.
-    """
-    destination.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=destination.parent) as tmp:
-        archive = Path(tmp) / "CascadedTanksFiles.zip"
-        with urllib.request.urlopen(ARCHIVE_URL, timeout=_DOWNLOAD_TIMEOUT) as response:
-            with open(archive, "wb") as handle:
-                shutil.copyfileobj(response, handle)
-        try:
-            with zipfile.ZipFile(archive) as zipped:
-                member = next(
-                    name for name in zipped.namelist()
-                    if name.endswith("dataBenchmark.mat")
-                )
-                extracted = Path(zipped.extract(member, tmp))
-        except (zipfile.BadZipFile, StopIteration):
-            raise OSError(
-                f"The download from {ARCHIVE_URL} is not the expected archive."
-            ) from None
-        if _sha256(extracted) != SHA256["dataBenchmark.mat"]:
-            raise OSError(
-                f"dataBenchmark.mat downloaded from {ARCHIVE_URL} has an unexpected "
-                "SHA-256."
-            )
-        shutil.move(extracted, destination)
-
-
-def _not_found_message(folders, reason):
-    places = "\n".join(f"  - {folder / _SUBFOLDER}/  or  {folder}/" for folder in folders)
-    return (
-        "The Cascaded Tanks data were not found"
-        f"{'' if reason is None else f' and could not be downloaded ({reason})'}.\n"
-        "Put one of the files 'dataBenchmark.mat' (from CascadedTanksFiles.zip, "
-        "4TU.ResearchData, doi:10.4121/12960104) or 'dataBenchmark_from_mat.csv' in "
-        "one of the searched folders:\n"
-        f"{places}\n"
-        "The folders searched are: the data_home argument, then the folder named by "
-        "the environment variable SKNLSS_DATA, then the user cache folder "
-        "($XDG_CACHE_HOME/sknlss or ~/.cache/sknlss)."
-    )
-
-
-def load_cascaded_tanks(data_home=None, *, download=True):
+@validate_params(
+    {"data_home": [str, os.PathLike, None], "download_if_missing": ["boolean"]},
+    prefer_skip_nested_validation=True,
+)
+def fetch_cascaded_tanks(data_home=None, *, download_if_missing=True):
     """Load the measured Cascaded Tanks benchmark records.
 
     The file ``dataBenchmark.mat`` (the publisher's file) or
@@ -164,15 +111,17 @@ def load_cascaded_tanks(data_home=None, *, download=True):
     folders in turn: ``data_home``, the folder named by the environment
     variable ``SKNLSS_DATA``, and the user cache folder
     (``$XDG_CACHE_HOME/sknlss``, by default ``~/.cache/sknlss``). The SHA-256 of
-    the file read is checked. When no folder holds the data and ``download`` is
-    True, the official archive is downloaded from 4TU.ResearchData
-    (doi:10.4121/12960104) into the cache folder.
+    the file read is checked. When no folder holds the data and
+    ``download_if_missing`` is True, the official archive
+    ``CascadedTanksFiles.zip`` is downloaded from 4TU.ResearchData
+    (doi:10.4121/12960104) into the cache folder, its SHA-256 checked and
+    ``dataBenchmark.mat`` extracted from it.
 
     Parameters
     ----------
     data_home : str or path-like, default=None
         First folder to search.
-    download : bool, default=True
+    download_if_missing : bool, default=True
         Whether to download the official archive when the data are absent.
 
     Returns
@@ -190,6 +139,13 @@ def load_cascaded_tanks(data_home=None, *, download=True):
             Test output.
         sampling_time : float
             4.0 seconds.
+        init_window : int
+            Samples at the start of the test record that may be used to set
+            the initial state under the nonlinear_benchmarks protocol (50).
+        excited_band : tuple of float
+            Lower and upper edge of the input's band, (0.0, 0.0144) Hz.
+        output_unit : str
+            Unit of the output, ``"V"``.
         filename : str
             The file read.
         DESCR : str
@@ -199,43 +155,73 @@ def load_cascaded_tanks(data_home=None, *, download=True):
     ------
     FileNotFoundError
         When the data are absent and cannot be downloaded; the message names
-        the accepted files and the folders searched.
+        the accepted files, the folders searched and why the download failed.
     ValueError
         When the file found does not have the official SHA-256.
 
     See Also
     --------
+    load_cascaded_tanks : The same loader under its earlier name.
     make_cascaded_tanks : Simulated data of the same system.
 
     Examples
     --------
-    >>> from sknlss.datasets import load_cascaded_tanks
-    >>> data = load_cascaded_tanks()  # doctest: +SKIP
-    >>> data.X_est.shape, data.y_test.shape  # doctest: +SKIP
-    ((1024, 1), (1024,))
+    >>> from sknlss.datasets import fetch_cascaded_tanks
+    >>> data = fetch_cascaded_tanks()  # doctest: +SKIP
+    >>> data.X_est.shape, data.y_test.shape, data.sampling_time  # doctest: +SKIP
+    ((1024, 1), (1024,), 4.0)
     """
-    folders = _search_folders(data_home)
-    found = next((path for folder in folders for path in _candidates(folder)
-                  if path.is_file()), None)
-    if found is None:
-        if not download:
-            raise FileNotFoundError(_not_found_message(folders, None))
-        found = _cache_home() / _SUBFOLDER / "dataBenchmark.mat"
-        try:
-            _download(found)
-        except (OSError, http.client.HTTPException) as exc:
-            raise FileNotFoundError(_not_found_message(folders, exc)) from exc
-    _check_hash(found)
-    u_est, y_est, u_test, y_test = _read_records(found)
+    path = fetch_file(CASCADED_TANKS, data_home, download_if_missing)
+    u_est, y_est, u_test, y_test = _read_records(path)
     return Bunch(
         X_est=u_est.reshape(-1, 1),
         y_est=y_est,
         X_test=u_test.reshape(-1, 1),
         y_test=y_test,
-        sampling_time=4.0,
-        filename=str(found),
+        sampling_time=_SAMPLING_TIME,
+        init_window=_INIT_WINDOW,
+        excited_band=_EXCITED_BAND,
+        output_unit="V",
+        filename=str(path),
         DESCR=_DESCR,
     )
+
+
+@validate_params(
+    {"data_home": [str, os.PathLike, None], "download": ["boolean"]},
+    prefer_skip_nested_validation=True,
+)
+def load_cascaded_tanks(data_home=None, *, download=True):
+    """Load the measured Cascaded Tanks benchmark records (alias).
+
+    The same as :func:`fetch_cascaded_tanks`, whose ``download_if_missing``
+    is called ``download`` here; kept for code written before the loaders
+    took scikit-learn's names.
+
+    Parameters
+    ----------
+    data_home : str or path-like, default=None
+        First folder to search.
+    download : bool, default=True
+        Whether to download the official archive when the data are absent.
+
+    Returns
+    -------
+    data : :class:`~sklearn.utils.Bunch`
+        The records and benchmark facts; see :func:`fetch_cascaded_tanks`.
+
+    See Also
+    --------
+    fetch_cascaded_tanks : The loader.
+
+    Examples
+    --------
+    >>> from sknlss.datasets import load_cascaded_tanks
+    >>> data = load_cascaded_tanks()  # doctest: +SKIP
+    >>> data.X_est.shape  # doctest: +SKIP
+    (1024, 1)
+    """
+    return fetch_cascaded_tanks(data_home, download_if_missing=download)
 
 
 @njit(cache=True)
@@ -298,11 +284,22 @@ def _benchmark_like_input(n_samples, sampling_time, rng):
     return np.maximum(2.8 + u[0], 0.0)
 
 
-def _check_nonnegative(name, value):
-    if not isinstance(value, Real) or not np.isfinite(value) or value < 0:
-        raise ValueError(f"{name} must be a non-negative finite number, got {value!r}.")
-
-
+@validate_params(
+    {
+        "n_samples": [Interval(Integral, 3, None, closed="left")],
+        "input": ["array-like", None],
+        "sampling_time": [Interval(Real, 0, np.inf, closed="neither")],
+        "process_noise": [Interval(Real, 0, np.inf, closed="left")],
+        "measurement_noise": [Interval(Real, 0, np.inf, closed="left")],
+        "overflow": ["array-like"],
+        "overflow_fraction": [Interval(Real, 0, 1, closed="both")],
+        "k": ["array-like"],
+        "x0": ["array-like", None],
+        "n_substeps": [Interval(Integral, 1, None, closed="left")],
+        "random_state": ["random_state"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
                         process_noise=0.01, measurement_noise=0.02,
                         overflow=(10.0, 10.0), overflow_fraction=0.5,
@@ -372,10 +369,17 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
             True levels (x1, x2) at the sampling instants.
         sampling_time : float
             Sampling time in seconds.
+        noise_std : float
+            Standard deviation of the measurement noise, ``measurement_noise``.
+        init_window : int
+            Samples at the start of the test record that may be used to set
+            the initial state, as in the benchmark (50).
+        DESCR : str
+            Equations and the parameter values used.
 
     See Also
     --------
-    load_cascaded_tanks : The measured benchmark data.
+    fetch_cascaded_tanks : The measured benchmark data.
 
     Examples
     --------
@@ -386,18 +390,6 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
     >>> bool(data.y_est.max() <= 10.1)
     True
     """
-    if not isinstance(n_samples, Integral) or isinstance(n_samples, bool) or n_samples < 3:
-        raise ValueError(f"n_samples must be an integer >= 3, got {n_samples!r}.")
-    if not isinstance(n_substeps, Integral) or n_substeps < 1:
-        raise ValueError(f"n_substeps must be a positive integer, got {n_substeps!r}.")
-    if not isinstance(sampling_time, Real) or not sampling_time > 0:
-        raise ValueError(f"sampling_time must be positive, got {sampling_time!r}.")
-    _check_nonnegative("process_noise", process_noise)
-    _check_nonnegative("measurement_noise", measurement_noise)
-    if not 0.0 <= overflow_fraction <= 1.0:
-        raise ValueError(
-            f"overflow_fraction must be in [0, 1], got {overflow_fraction!r}."
-        )
     overflow = np.asarray(overflow, dtype=np.float64)
     constants = np.asarray(k, dtype=np.float64)
     if overflow.shape != (2,) or np.any(overflow <= 0) or np.any(np.isnan(overflow)):
@@ -434,8 +426,18 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
         y = states[:, 1] + measurement_noise * rng.standard_normal(n_samples)
         records.append((u.reshape(-1, 1), y, states))
     (X_est, y_est, states_est), (X_test, y_test, states_test) = records
+    descr = _SIMULATION_DESCR.format(
+        k=constants, overflow=overflow, fraction=overflow_fraction,
+        process=process_noise, measurement=measurement_noise, x0=x0,
+        sampling_time=sampling_time, n_substeps=n_substeps,
+        input="the given arrays" if input is not None else (
+            "two realisations of a low-pass multisine like the benchmark's (0 to "
+            "0.0144 Hz, mean 2.8 V, RMS 1 V about the mean, the lowest third of the "
+            "band ten times stronger, negative values clipped to 0)"),
+    )
     return Bunch(
         X_est=X_est, y_est=y_est, X_test=X_test, y_test=y_test,
         states_est=states_est, states_test=states_test,
-        sampling_time=float(sampling_time),
+        sampling_time=float(sampling_time), noise_std=float(measurement_noise),
+        init_window=_INIT_WINDOW, DESCR=descr,
     )

@@ -4,6 +4,7 @@ from numbers import Integral
 
 import numpy as np
 from sklearn.utils import Bunch, check_random_state
+from sklearn.utils._param_validation import Interval, validate_params
 
 from .._core._model import StateSpaceModel
 from .._terms._polynomial import PolynomialTerms, monomial_exponents
@@ -56,6 +57,16 @@ a correct PNLSS model about 1e-4 to 3e-4.
 """
 
 
+@validate_params(
+    {
+        "n_realizations": [Interval(Integral, 1, None, closed="left")],
+        "n_periods": [Interval(Integral, 1, None, closed="left")],
+        "n_samples_per_period": [Interval(Integral, 8, None, closed="left")],
+        "noise": ["boolean"],
+        "random_state": ["random_state"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def make_pnlss_reference(*, n_realizations=4, n_periods=3, n_samples_per_period=1024,
                          noise=True, random_state=0):
     """Steady-state multisine data of the reference PNLSS system.
@@ -117,11 +128,6 @@ def make_pnlss_reference(*, n_realizations=4, n_periods=3, n_samples_per_period=
     >>> data.X.shape, data.y.shape, data.exponents.shape
     ((4096, 1), (4096,), (16, 3))
     """
-    for name, value, low in (("n_realizations", n_realizations, 1),
-                             ("n_periods", n_periods, 1),
-                             ("n_samples_per_period", n_samples_per_period, 8)):
-        if not isinstance(value, Integral) or isinstance(value, bool) or value < low:
-            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}.")
     rng = check_random_state(random_state)
     exponents = monomial_exponents(2, 1, (2, 3))
     n = int(n_samples_per_period)
