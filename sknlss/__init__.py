@@ -32,7 +32,7 @@ from ._estimators._nlss2 import NLSS2Regressor
 from ._estimators._pnlss import PNLSSRegressor
 from ._terms._bases import ChebyshevBasis, LegendreBasis, PolynomialBasis
 from ._terms._cpd import decouple_polynomial
-from .exceptions import SimulationDivergedWarning
+from .exceptions import LinearFallbackWarning, SimulationDivergedWarning
 
 __version__ = "0.1.0"
 
@@ -41,6 +41,7 @@ __all__ = [
     "ChebyshevBasis",
     "DecoupledPNLSS",
     "LegendreBasis",
+    "LinearFallbackWarning",
     "NLLFRRegressor",
     "NLSS2Regressor",
     "PNLSSRegressor",

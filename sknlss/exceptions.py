@@ -5,7 +5,7 @@ The library also issues scikit-learn's
 its iteration limit while it is still improving.
 """
 
-__all__ = ["SimulationDivergedWarning"]
+__all__ = ["LinearFallbackWarning", "SimulationDivergedWarning"]
 
 
 class SimulationDivergedWarning(RuntimeWarning):
@@ -13,4 +13,13 @@ class SimulationDivergedWarning(RuntimeWarning):
 
     The outputs from the first divergent sample to the end of that sequence are
     set to NaN.
+    """
+
+
+class LinearFallbackWarning(UserWarning):
+    """Warning raised when a nonlinear model does not beat its linear start.
+
+    No start of the nonlinear optimisation simulated the held-out data better
+    than the linear model it started from; the estimator keeps that linear
+    model (its nonlinear terms are zero) and sets ``fell_back_to_linear_``.
     """

@@ -9,9 +9,10 @@ import pytest
 docscrape = pytest.importorskip("numpydoc.docscrape")
 
 PUBLIC_MODULES = ["sknlss", "sknlss.metrics", "sknlss.signals", "sknlss.datasets",
-                  "sknlss.plotting", "sknlss.model_selection"]
-# The main job's Python interface, documented in the API reference.
-COMMAND_LINE = {"sknlss.__main__": ["reproduce", "main"]}
+                  "sknlss.plotting", "sknlss.model_selection", "sknlss.benchmarks",
+                  "sknlss.exceptions"]
+# The command line's entry point, documented in the API reference.
+COMMAND_LINE = {"sknlss.__main__": ["main"]}
 
 
 def _public_objects():

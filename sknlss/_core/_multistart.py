@@ -1,4 +1,4 @@
-"""Several starts of one fit, run in parallel and ranked on their held-out loss."""
+"""Several starts of one fit, run in parallel; one start from candidate points."""
 
 import numpy as np
 from sklearn.utils.parallel import Parallel, delayed
@@ -18,13 +18,11 @@ def _guarded(fit_one, *args):
 
 
 def run_starts(fit_one, starts, n_jobs=None):
-    """Run ``fit_one(*start)`` for every start and rank the outcomes.
+    """Run ``fit_one(*start)`` for every start, in parallel with joblib.
 
     Parameters
     ----------
     fit_one : callable
-        Returns a tuple whose second item is an
-        :class:`~sknlss._core._optimize.LMResult`.
     starts : list of tuple
         Arguments of each start.
     n_jobs : int, default=None
@@ -33,17 +31,10 @@ def run_starts(fit_one, starts, n_jobs=None):
     Returns
     -------
     outcomes : list
-        The return value of every start, or the exception it raised.
-    best : int or None
-        Index of the start with the lowest selection loss (held-out loss, or
-        cost without hold-out; the first of equals); None when every start
-        raised.
+        The return value of every start, or the exception it raised (a start
+        whose numerics fail leaves the others standing).
     """
-    outcomes = Parallel(n_jobs=n_jobs)(delayed(_guarded)(fit_one, *start)
-                                       for start in starts)
-    ranked = [(outcome[1].selection_loss, i) for i, outcome in enumerate(outcomes)
-              if not isinstance(outcome, Exception)]
-    return outcomes, (min(ranked)[1] if ranked else None)
+    return Parallel(n_jobs=n_jobs)(delayed(_guarded)(fit_one, *start) for start in starts)
 
 
 def _finite(r, J):

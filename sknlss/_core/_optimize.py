@@ -57,14 +57,6 @@ class LMResult:
     converged: bool
     stopped_early: bool = False
 
-    @property
-    def selection_loss(self):
-        """Loss that ranks results: the validation loss of the selected
-        iterate, or its cost without validation."""
-        history = self.loss_history if self.validation_history is None else (
-            self.validation_history)
-        return float(history[self.best_iter])
-
 
 def _scaled_step_factors(J, r):
     """SVD factors of the column-scaled Jacobian needed for the damped step.

@@ -26,7 +26,7 @@ from threadpoolctl import threadpool_limits
 from .._core._sequences import part_before_holdout
 from .._linear._state_estimation import estimate_states
 from .._terms._network import ACTIVATIONS, NetworkTerms
-from ._nonlinear import _BaseNonlinearStateSpace
+from ._nonlinear import _BaseNonlinearStateSpace, holdout_loss
 
 #: Candidate state-estimation weights tried by ``alpha="auto"``.
 ALPHA_GRID = np.logspace(-2, 3, 6)
@@ -109,17 +109,6 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
     if model.estimate_x0:
         values["x0"] = states[starts_fit[:-1]].mean(axis=0)
     return model.pack(values)
-
-
-def _selection_loss(problem, theta):
-    """Mean squared simulation error on the held-out rows (the fitted rows
-    without hold-out); ``inf`` when the simulation diverges."""
-    rows = problem.val_rows if problem.val_rows.any() else problem.fit_rows
-    Y, _, diverged = problem.simulate(theta)
-    error = Y[rows] - problem.Y[rows]
-    if diverged or not np.all(np.isfinite(error)):
-        return np.inf
-    return float(np.mean(error**2))
 
 
 class NLSS2Regressor(_BaseNonlinearStateSpace):
@@ -375,7 +364,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
             # The same network seed for every candidate (paper §4.2).
             seed = check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
             self.alpha_losses_ = np.array([
-                _selection_loss(problem, _initial_theta(context, alpha, self.activation,
+                holdout_loss(problem, _initial_theta(context, alpha, self.activation,
                                                         self.n_neurons, seed))
                 for alpha in ALPHA_GRID
             ])

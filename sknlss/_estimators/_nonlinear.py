@@ -20,6 +20,7 @@ A subclass provides its terms (``_make_terms``), its starting points
 (``_set_terms`` and ``_terms_values``).
 """
 
+import warnings
 from abc import abstractmethod
 from numbers import Integral, Real
 
@@ -31,8 +32,21 @@ from .._core._model import StateSpaceModel
 from .._core._multistart import fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import part_before_holdout, steady_state_rows
+from ..exceptions import LinearFallbackWarning
 from ._base import _BaseStateSpace, normalisation_of
 from ._bla import BLAEstimator, fit_linear_model, fitted_bla
+
+
+#: Held-out shares of the end of every sequence given to the starts in turn
+#: with ``validation_fraction="auto"``; the starts are ranked on the end that
+#: all of them held out. On a short record, the model a single held-out end
+#: selects changes a lot when that end moves by a few samples.
+_AUTO_SHARES = (0.25, 0.3, 0.35, 0.275, 0.325)
+#: Without an estimated initial state, the cost skips the samples in which the
+#: slowest pole of the linear model decays to this fraction, at most this
+#: share of the shortest sequence.
+_SETTLED = 1e-2
+_MAX_TRANSIENT_SHARE = 0.1
 
 
 class _BaseNonlinearStateSpace(_BaseStateSpace):
@@ -50,7 +64,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         "bla": [BLAEstimator, None],
         "max_iter": [Interval(Integral, 0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
-        "validation_fraction": [Interval(Real, 0, 1, closed="left")],
+        "validation_fraction": [Interval(Real, 0, 1, closed="left"), StrOptions({"auto"})],
         "n_iter_no_change": [Interval(Integral, 1, None, closed="left"), None],
         "n_init": [Interval(Integral, 1, None, closed="left")],
         "n_jobs": [Integral, None],
@@ -149,39 +163,86 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return dict(max_iter=self.max_iter, tol=self.tol, n_drop=self._n_drop(model),
                     n_iter_no_change=self.n_iter_no_change, verbose=self.verbose)
 
+    def _validation_shares(self, starts):
+        """The held-out share of every start."""
+        if self.validation_fraction != "auto":
+            return [float(self.validation_fraction)] * self.n_init
+        lengths = np.diff(starts)
+        if self.period is not None and np.min(lengths) < 2 * self.period:
+            # Periodic records of one period: no whole period can be held out.
+            return [0.0] * self.n_init
+        return [_AUTO_SHARES[i % len(_AUTO_SHARES)] for i in range(self.n_init)]
+
+    def _cost_transient(self, A, starts):
+        """Samples per sequence left out of the cost: ``n_transient``, and without
+        an estimated initial state, at least the settling time of the linear
+        model's slowest pole (a record rarely starts at rest)."""
+        if self.estimate_x0 or self.period is not None:
+            return self.n_transient
+        radius = np.max(np.abs(np.linalg.eigvals(A)), initial=0.0)
+        settling = 0 if radius <= 0 else int(np.ceil(np.log(_SETTLED) / np.log(radius)))
+        limit = int(_MAX_TRANSIENT_SHARE * np.min(np.diff(starts)))
+        return max(self.n_transient, min(settling, limit))
+
     def _fit_normalized(self, U, Y, starts):
         self._check_periodic(starts)
-        rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
-                        validation_fraction=self.validation_fraction,
-                        steady_state_period=self.period)
-        A, B, C, D, x0 = self._linear_start(U, Y, starts, rows.fit_rows[rows.original])
+        shares = self._validation_shares(starts)
+        bla_rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
+                            validation_fraction=max(shares), steady_state_period=self.period)
+        A, B, C, D, x0 = self._linear_start(U, Y, starts,
+                                            bla_rows.fit_rows[bla_rows.original])
+        self.fit_transient_ = self._cost_transient(A, starts)
         model = StateSpaceModel(self.n_states, U.shape[1], Y.shape[1],
                                 self._make_terms(U.shape[1], Y.shape[1]),
                                 estimate_x0=self.estimate_x0)
-        problem = SimulationErrorProblem(
-            model, rows, frequency_period=self.period if self.cost == "frequency" else None,
+        problems = {share: SimulationErrorProblem(
+            model, fit_rows(U, Y, starts, n_transient=self.fit_transient_,
+                            validation_fraction=share, steady_state_period=self.period),
+            frequency_period=self.period if self.cost == "frequency" else None,
             stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
-        )
+        ) for share in sorted(set(shares))}
+        # The problem with the largest hold-out serves the work shared by all
+        # starts: it sees only rows that none of the starts selects on.
+        problem = problems[max(shares)]
         values = {name: np.zeros(shape) for name, shape in model.blocks}
         values.update(A=A, B=B, C=C, D=D, x0=x0)
         theta = self._refined_linear_start(problem, model.pack(values))
         seeds = check_random_state(self.random_state).randint(
             np.iinfo(np.int32).max, size=self.n_init)
         context = {"problem": problem, "model": model, "theta": theta, "U": U, "Y": Y,
-                   "starts": starts, "rows": rows, "seeds": seeds}
+                   "starts": starts, "rows": problem.rows, "seeds": seeds}
         self._prepare_starts(context)
+        for other in problems.values():
+            other.decay_scale = problem.decay_scale
         options = self._lm_options(model)
-        outcomes, best = run_starts(
+        outcomes = run_starts(
             _fit_start,
-            [(self, context, i, seed, f"{self._label} start {i}" if self.n_init > 1
-              else self._label, options) for i, seed in enumerate(seeds)],
+            [(self, context, problems[share], i, seed,
+              f"{self._label} start {i}" if self.n_init > 1 else self._label, options)
+             for i, (share, seed) in enumerate(zip(shares, seeds))],
             n_jobs=self.n_jobs,
         )
-        if best is None:
-            raise outcomes[0]
-        theta, result = outcomes[best]
+        failures = [outcome for outcome in outcomes if isinstance(outcome, Exception)]
+        if len(failures) == len(outcomes):
+            raise failures[0]
+        # Every start is judged on the end that all of them held out.
+        common = problems[min(shares)]
+        losses = [np.inf if isinstance(outcome, Exception) else holdout_loss(common, outcome[0])
+                  for outcome in outcomes]
+        best = int(np.argmin(losses))
+        theta_best, result = outcomes[best]
+        self.start_losses_ = np.asarray(losses)
+        linear_loss = holdout_loss(common, theta)
+        self.fell_back_to_linear_ = not losses[best] < linear_loss
+        if self.fell_back_to_linear_:
+            warnings.warn(
+                f"{self._label}: no start beat the linear model on the held-out data "
+                f"(mean squared error {losses[best]:.3g} against {linear_loss:.3g}); "
+                "the linear model is kept (its nonlinear terms are zero).",
+                LinearFallbackWarning, stacklevel=3)
+            theta_best = theta
         self._record_start(context, best, seeds[best])
-        values = model.unpack(theta)
+        values = model.unpack(theta_best)
         self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
         self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
         self._set_terms(values)
@@ -208,7 +269,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return Y[original], X[original], diverged
 
 
-def _fit_start(estimator, context, start, seed, label, options):
-    """One start: the estimator's candidates, then Levenberg-Marquardt."""
+def _fit_start(estimator, context, problem, start, seed, label, options):
+    """One start: the estimator's candidates, then Levenberg-Marquardt on ``problem``."""
     candidates = estimator._starting_points(context, start, seed)
-    return fit_from(context["problem"], candidates, label=label, **options)
+    return fit_from(problem, candidates, label=label, **options)
+
+
+def holdout_loss(problem, theta):
+    """Mean squared simulation error of ``theta`` on the problem's held-out rows
+    (its cost rows when nothing is held out); inf when it diverges."""
+    rows = problem.val_rows if problem.val_rows.any() else problem.fit_rows
+    Y, _, diverged = problem.simulate(theta)
+    if diverged:
+        return np.inf
+    return float(np.mean((Y[rows] - problem.Y[rows]) ** 2))

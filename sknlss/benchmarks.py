@@ -1,0 +1,281 @@
+"""Benchmark reproductions: the models of the library on the real benchmarks.
+
+Each benchmark fits every model on its estimation record only, with the
+estimators' defaults and the model structure of the paper, at several random
+states, and reports the RMS error of the simulated output on its test records
+as the median and the range over the random states. ``python -m sknlss
+reproduce`` is a thin command line over :func:`reproduce`.
+
+- Cascaded Tanks (DESIGN.md §3): the initial state is estimated on the
+  estimation record and reused on the test record; the RMS error is reported
+  over all test samples and, as in the nonlinear_benchmarks protocol, without
+  the first ``init_window`` samples. Volts.
+- Silverbox: every test record is simulated from its start; the RMS error is
+  reported without its first ``init_window`` samples, in millivolts.
+
+When the measured data cannot be found or downloaded, a simulated stand-in of
+the same kind is used instead, and said so.
+"""
+
+import math
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .datasets import fetch_cascaded_tanks, fetch_silverbox, make_cascaded_tanks, make_duffing
+from .exceptions import SimulationDivergedWarning
+from .metrics import rms_error
+
+__all__ = ["BENCHMARKS", "Benchmark", "evaluate", "load_benchmark", "reproduce"]
+
+
+def _tanks_models():
+    from . import BLAEstimator, DecoupledPNLSS, NLLFRRegressor, NLSS2Regressor, PNLSSRegressor
+
+    return [
+        ("BLA", lambda seed: BLAEstimator(n_states=2, estimate_x0=True)),
+        ("PNLSS", lambda seed: PNLSSRegressor(n_states=3, degree=(2, 3),
+                                              random_state=seed)),
+        ("PNLSS-I", lambda seed: PNLSSRegressor(n_states=3, degree=(2, 3),
+                                                estimate_x0=True, random_state=seed)),
+        ("decoupled PNLSS-I", lambda seed: DecoupledPNLSS(n_states=3, rank=5,
+                                                          estimate_x0=True,
+                                                          random_state=seed)),
+        ("NLSS2", lambda seed: NLSS2Regressor(n_states=3, estimate_x0=True,
+                                              random_state=seed)),
+        ("NL-LFR", lambda seed: NLLFRRegressor(n_states=3, estimate_x0=True,
+                                               random_state=seed)),
+    ]
+
+
+def _silverbox_models():
+    from . import BLAEstimator, DecoupledPNLSS, NLLFRRegressor, NLSS2Regressor, PNLSSRegressor
+
+    return [
+        ("BLA", lambda seed: BLAEstimator(n_states=2)),
+        ("PNLSS", lambda seed: PNLSSRegressor(n_states=2, random_state=seed)),
+        ("decoupled PNLSS", lambda seed: DecoupledPNLSS(n_states=2, random_state=seed)),
+        ("NLSS2", lambda seed: NLSS2Regressor(n_states=2, random_state=seed)),
+        ("NL-LFR", lambda seed: NLLFRRegressor(n_states=2, random_state=seed)),
+    ]
+
+
+def _tanks_records(data):
+    window = data.init_window
+    return {"test": (data.X_test, data.y_test, 0),
+            f"test[{window}:]": (data.X_test, data.y_test, window)}
+
+
+def _silverbox_records(data):
+    return {name: (record.X, record.y, data.init_window) for name, record in data.tests.items()}
+
+
+def _duffing_stand_in(random_state=0):
+    """Simulated Duffing oscillator with the Silverbox's fields."""
+    data = make_duffing(random_state=random_state)
+    data.tests = {"test": data.__class__(X=data.X_test, y=data.y_test)}
+    return data
+
+
+@dataclass
+class Benchmark:
+    """A benchmark: where its data come from, its models and how it is scored.
+
+    Attributes
+    ----------
+    title : str
+    fetch : callable
+        ``fetch(data_home, download_if_missing=...)`` returns the measured data.
+    simulate : callable
+        Returns a simulated stand-in of the same kind (used when the data
+        cannot be had).
+    models : callable
+        Returns the list of ``(label, factory)``; ``factory(random_state)``
+        returns an unfitted estimator.
+    records : callable
+        ``records(data)`` returns ``{name: (X, y, n_skip)}``: the test records
+        and the samples skipped at their start.
+    unit : str
+        Unit of the reported errors.
+    scale : float
+        Factor from the data's unit to ``unit``.
+    """
+
+    title: str
+    fetch: object
+    simulate: object
+    models: object
+    records: object
+    unit: str = "V"
+    scale: float = 1.0
+
+
+#: The benchmarks of :func:`reproduce`, by name.
+BENCHMARKS = {
+    "cascaded_tanks": Benchmark("Cascaded Tanks", fetch_cascaded_tanks,
+                                lambda: make_cascaded_tanks(random_state=0), _tanks_models,
+                                _tanks_records, unit="V"),
+    "silverbox": Benchmark("Silverbox", fetch_silverbox, _duffing_stand_in,
+                           _silverbox_models, _silverbox_records, unit="mV", scale=1e3),
+}
+
+
+def load_benchmark(name, data_home=None, *, download_if_missing=True, out=None):
+    """The measured records of a benchmark, or a simulated stand-in when they cannot be had.
+
+    Parameters
+    ----------
+    name : {"cascaded_tanks", "silverbox"}
+        The benchmark.
+    data_home : str or path-like, default=None
+        First folder searched for the data (see the ``fetch_*`` loaders).
+    download_if_missing : bool, default=True
+        Whether to download the data when they are absent.
+    out : file-like, default=None
+        Where to say that simulated data are used; standard output when None.
+
+    Returns
+    -------
+    data : Bunch
+        The records, as the dataset loader returns them.
+    source : str
+        ``"measured (<file>)"`` or ``"simulated (...)"``.
+    """
+    benchmark = BENCHMARKS[name]
+    out = sys.stdout if out is None else out
+    try:
+        data = benchmark.fetch(data_home, download_if_missing=download_if_missing)
+    except FileNotFoundError as exc:
+        print(f"{exc}\n", file=out)
+        print(f"FALLING BACK TO SIMULATED DATA for {benchmark.title}: the numbers below "
+              "are NOT the benchmark's results.\n", file=out)
+        return benchmark.simulate(), "simulated"
+    return data, f"measured ({data.filename})"
+
+
+def _fit_and_score(factory, seed, data, records, scale):
+    model = factory(seed)
+    start = time.perf_counter()
+    model.fit(data.X_est, data.y_est)
+    fit_time = time.perf_counter() - start
+    errors = {}
+    with warnings.catch_warnings():
+        # A diverging simulation is reported as such in the table.
+        warnings.simplefilter("ignore", SimulationDivergedWarning)
+        for name, (X, y, skip) in records.items():
+            errors[name] = scale * rms_error(y[skip:], model.predict(X)[skip:])
+    return model, errors, fit_time
+
+
+def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, out=None):
+    """Fit every model at every random state and summarise its test errors.
+
+    Parameters
+    ----------
+    data : Bunch
+        With ``X_est``, ``y_est``.
+    models : list of (str, callable)
+        ``(label, factory)``; ``factory(random_state)`` returns an estimator.
+    records : dict
+        ``{name: (X, y, n_skip)}``, the test records.
+    random_states : sequence of int, default=(0, 1, 2)
+        Random states of the fits.
+    scale : float, default=1.0
+        Factor applied to the RMS errors (e.g. 1e3 for mV).
+    out : file-like, default=None
+        Where to print the progress; nothing is printed when None.
+
+    Returns
+    -------
+    rows : list of dict
+        One per model: ``model``, ``n_params``, ``fit_time`` (median, s), and
+        per test record ``<name>`` (median), ``<name> min``, ``<name> max``;
+        a diverging simulation counts as an infinite error.
+    fitted : dict
+        The fitted model of the first random state, by label.
+    """
+    rows, fitted = [], {}
+    for label, factory in models:
+        errors, times = {name: [] for name in records}, []
+        for seed in random_states:
+            model, scores, fit_time = _fit_and_score(factory, seed, data, records, scale)
+            fitted.setdefault(label, model)
+            times.append(fit_time)
+            for name, value in scores.items():
+                errors[name].append(value if math.isfinite(value) else math.inf)
+        row = {"model": label, "n_params": int(fitted[label].n_params_),
+               "fit_time": float(np.median(times))}
+        for name, values in errors.items():
+            row[name] = float(np.median(values))
+            row[f"{name} min"], row[f"{name} max"] = float(min(values)), float(max(values))
+        rows.append(row)
+        if out is not None:
+            print(f"  {label}: {len(random_states)} fit(s), median {row['fit_time']:.1f} s",
+                  file=out, flush=True)
+    return rows, fitted
+
+
+def format_table(rows, records, unit):
+    """The rows of :func:`evaluate` as a text table: median [min, max] per record."""
+    header = ["model", "params"] + [f"{name} ({unit})" for name in records] + ["fit (s)"]
+    lines = [header]
+    for row in rows:
+        cells = [row["model"], str(row["n_params"])]
+        for name in records:
+            values = (row[name], row[f"{name} min"], row[f"{name} max"])
+            text = ["diverged" if not math.isfinite(v) else f"{v:.4g}" for v in values]
+            cells.append(text[0] if text[1] == text[2] else f"{text[0]} [{text[1]}, {text[2]}]")
+        cells.append(f"{row['fit_time']:.1f}")
+        lines.append(cells)
+    widths = [max(len(line[i]) for line in lines) for i in range(len(header))]
+    text = ["  ".join(cell.rjust(width) for cell, width in zip(line, widths)) for line in lines]
+    text.insert(1, "  ".join("-" * width for width in widths))
+    return "\n".join(text)
+
+
+def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, output=None,
+              download_if_missing=True, random_states=(0, 1, 2), out=None):
+    """Fit the models on the benchmarks and print the result tables.
+
+    Parameters
+    ----------
+    benchmarks : sequence of str, default=("cascaded_tanks", "silverbox")
+        Names in :data:`BENCHMARKS`.
+    data_home : str or path-like, default=None
+        First folder searched for the data.
+    output : str or path-like, default=None
+        Folder where each benchmark's table (CSV) and figures (PNG, with
+        matplotlib) are written; nothing is written when None.
+    download_if_missing : bool, default=True
+        Whether to download the data when they are absent.
+    random_states : sequence of int, default=(0, 1, 2)
+        Random states of the fits; the tables give the median and the range.
+    out : file-like, default=None
+        Where to print; standard output when None.
+
+    Returns
+    -------
+    tables : dict
+        Per benchmark name, the rows of :func:`evaluate`.
+    """
+    from ._reporting import write_results
+
+    out = sys.stdout if out is None else out
+    tables = {}
+    for name in benchmarks:
+        benchmark = BENCHMARKS[name]
+        data, source = load_benchmark(name, data_home, download_if_missing=download_if_missing,
+                                      out=out)
+        records = benchmark.records(data)
+        print(f"{benchmark.title}, data: {source}; fitted on the estimation record only, "
+              f"random states {list(random_states)}.", file=out, flush=True)
+        rows, fitted = evaluate(data, benchmark.models(), records,
+                                random_states=random_states, scale=benchmark.scale, out=out)
+        print("\n" + format_table(rows, records, benchmark.unit) + "\n", file=out, flush=True)
+        tables[name] = rows
+        if output is not None:
+            write_results(name, benchmark, data, rows, fitted, output, out)
+    return tables

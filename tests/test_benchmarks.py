@@ -1,0 +1,84 @@
+"""The benchmark reproductions and the command line over them."""
+
+import io
+import math
+
+import numpy as np
+import pytest
+
+from sknlss import BLAEstimator, benchmarks
+from sknlss.__main__ import main
+from sknlss.benchmarks import BENCHMARKS, Benchmark, evaluate, format_table, reproduce
+from sknlss.datasets import make_cascaded_tanks
+
+
+def _tiny_benchmark():
+    data = make_cascaded_tanks(n_samples=256, random_state=0)
+    return Benchmark(
+        "Tiny tanks", lambda home, download_if_missing: data, lambda: data,
+        lambda: [("BLA", lambda seed: BLAEstimator(n_states=2, estimate_x0=True)),
+                 ("BLA 1", lambda seed: BLAEstimator(n_states=1))],
+        lambda d: {"test": (d.X_test, d.y_test, 0)},
+    )
+
+
+def test_evaluate_summarises_over_random_states():
+    data = make_cascaded_tanks(n_samples=256, random_state=0)
+    records = {"test": (data.X_test, data.y_test, 0), "tail": (data.X_test, data.y_test, 50)}
+    rows, fitted = evaluate(data, [("BLA", lambda seed: BLAEstimator(n_states=2))], records,
+                            random_states=(0, 1), scale=1e3)
+    row = rows[0]
+    assert row["model"] == "BLA" and row["n_params"] == 9
+    assert row["test min"] <= row["test"] <= row["test max"]
+    assert math.isfinite(row["tail"])
+    assert isinstance(fitted["BLA"], BLAEstimator)
+    text = format_table(rows, records, "mV")
+    assert "test (mV)" in text and "BLA" in text
+
+
+def test_reproduce_writes_tables_and_figures(monkeypatch, tmp_path):
+    monkeypatch.setitem(BENCHMARKS, "tiny", _tiny_benchmark())
+    out = io.StringIO()
+    tables = reproduce(["tiny"], output=tmp_path, random_states=(0,), out=out)
+    assert [row["model"] for row in tables["tiny"]] == ["BLA", "BLA 1"]
+    assert (tmp_path / "tiny.csv").is_file()
+    assert any(path.suffix == ".png" for path in tmp_path.iterdir())
+    assert "Tiny tanks" in out.getvalue()
+
+
+def test_missing_data_fall_back_to_simulated(monkeypatch):
+    def missing(home, download_if_missing):
+        raise FileNotFoundError("no data here")
+
+    benchmark = _tiny_benchmark()
+    benchmark.fetch = missing
+    monkeypatch.setitem(BENCHMARKS, "tiny", benchmark)
+    out = io.StringIO()
+    data, source = benchmarks.load_benchmark("tiny", out=out)
+    assert source == "simulated"
+    assert "FALLING BACK TO SIMULATED DATA" in out.getvalue()
+    assert data.X_est.shape[1] == 1
+
+
+def test_command_line(monkeypatch):
+    calls = []
+    monkeypatch.setattr("sknlss.__main__.reproduce",
+                        lambda names, **kwargs: calls.append((names, kwargs)))
+    assert main(["reproduce", "--benchmark", "silverbox", "--random-states", "3", "4",
+                 "--no-download", "--output", "somewhere"]) == 0
+    names, kwargs = calls[0]
+    assert names == ["silverbox"]
+    assert kwargs["random_states"] == (3, 4) and not kwargs["download_if_missing"]
+    main(["reproduce"])
+    assert calls[1][0] == sorted(BENCHMARKS)
+    with pytest.raises(SystemExit):
+        main(["reproduce", "--benchmark", "nowhere"])
+
+
+@pytest.mark.parametrize("name", sorted(BENCHMARKS))
+def test_benchmarks_define_their_models(name):
+    models = BENCHMARKS[name].models()
+    assert models[0][0] == "BLA"
+    for label, factory in models:
+        estimator = factory(0)
+        assert hasattr(estimator, "fit") and np.isscalar(estimator.get_params()["n_states"])

@@ -1,0 +1,85 @@
+"""NL-LFR estimator and the bases of its static nonlinearity."""
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+
+from sknlss import (
+    BLAEstimator,
+    ChebyshevBasis,
+    LegendreBasis,
+    NLLFRRegressor,
+    PolynomialBasis,
+)
+from sknlss.metrics import rms_error
+
+pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+
+
+def _duffing(u):
+    x = np.zeros(2)
+    y = np.empty(len(u))
+    for t, ut in enumerate(u[:, 0]):
+        y[t] = x[0]
+        x = np.array([1.5 * x[0] - 0.7 * x[1] - 0.1 * x[0] ** 3 + ut, x[0]])
+    return y
+
+
+@pytest.fixture(scope="module")
+def records():
+    rng = np.random.default_rng(0)
+    u, u_test = rng.standard_normal((600, 1)), rng.standard_normal((400, 1))
+    return u, _duffing(u), u_test, _duffing(u_test)
+
+
+def test_recovers_a_cubic_feedback(records):
+    u, y, u_test, y_test = records
+    model = NLLFRRegressor(n_states=2, max_iter=50).fit(u, y)
+    linear = BLAEstimator(n_states=2).fit(u, y)
+    assert rms_error(y_test, model.predict(u_test)) < 0.02 * rms_error(
+        y_test, linear.predict(u_test))
+    # 9 linear, Bw 2, Dw 1, Cz 2, Dz 1, 2 coefficients.
+    assert model.n_params_ == 17
+    assert model.Bw_.shape == (2, 1) and model.Dw_.shape == (1, 1)
+    assert model.Cz_.shape == (1, 2) and model.Dz_.shape == (1, 1)
+    assert model.coefficients_.shape == (1, 2)
+
+
+def test_initialisation_alone_is_close(records):
+    # The least-squares initialisation along the BLA's trajectory already
+    # captures most of the nonlinearity, before any iteration.
+    u, y, u_test, y_test = records
+    start = NLLFRRegressor(n_states=2, max_iter=0, n_init=1, validation_fraction=0.0)
+    start.fit(u, y)
+    linear = BLAEstimator(n_states=2).fit(u, y)
+    assert rms_error(y, start.predict(u)) < 0.5 * rms_error(y, linear.predict(u))
+
+
+@pytest.mark.parametrize("basis", [PolynomialBasis(3, kind="odd"), LegendreBasis(3),
+                                   ChebyshevBasis(3)])
+def test_bases(basis, records):
+    u, y, _, _ = records
+    model = NLLFRRegressor(n_states=2, n_branches=2, basis=basis, max_iter=10).fit(u, y)
+    assert model.coefficients_.shape == (2, basis.n_functions)
+    assert model.score(u, y) > 0.9
+    assert clone(model).basis == basis
+
+
+def test_bounded_bases_stay_bounded():
+    z = np.array([-1e6, -3.0, 0.0, 3.0, 1e6])
+    for basis in (LegendreBasis(5), ChebyshevBasis(5)):
+        values, slopes = basis.evaluate(z)
+        assert np.all(np.abs(values) <= 1.0 + 1e-12)
+        assert np.all(np.isfinite(slopes))
+
+
+@pytest.mark.parametrize("basis, message", [
+    (PolynomialBasis(1), "degree must be an int >= 2"),
+    (PolynomialBasis(2, kind="odd"), "needs degree >= 3"),
+    (PolynomialBasis(3, kind="cubic"), "kind must be"),
+    (LegendreBasis(0), "degree must be an int >= 1"),
+])
+def test_bad_basis(basis, message, records):
+    u, y, _, _ = records
+    with pytest.raises(ValueError, match=message):
+        NLLFRRegressor(n_states=2, basis=basis).fit(u, y)

@@ -1,0 +1,145 @@
+"""Behaviour shared by the nonlinear estimators: every option of the shared
+simulation-error core, for every estimator; the linear model they start from."""
+
+import warnings
+
+import numpy as np
+import pytest
+from sklearn.exceptions import ConvergenceWarning
+
+from sknlss import (
+    BLAEstimator,
+    DecoupledPNLSS,
+    LinearFallbackWarning,
+    NLLFRRegressor,
+    NLSS2Regressor,
+    PNLSSRegressor,
+)
+from sknlss.metrics import rms_error
+from sknlss.signals import multisine
+
+pytestmark = pytest.mark.filterwarnings(
+    "ignore::sklearn.exceptions.ConvergenceWarning",
+    "ignore::sknlss.exceptions.LinearFallbackWarning",
+)
+
+# Small, fast settings of every nonlinear estimator.
+FACTORIES = {
+    "PNLSS": lambda **kw: PNLSSRegressor(degree=(2, 3), max_iter=8, **kw),
+    "NLSS2": lambda **kw: NLSS2Regressor(max_iter=8, random_state=0, **kw),
+    "Decoupled": lambda **kw: DecoupledPNLSS(
+        rank=2, pnlss=PNLSSRegressor(degree=(2, 3), max_iter=5), n_restarts=2, max_iter=8,
+        random_state=0, **kw),
+    "NL-LFR": lambda **kw: NLLFRRegressor(max_iter=8, random_state=0, **kw),
+}
+
+
+def _duffing(u, x0=(0.0, 0.0)):
+    """A discrete Duffing-like oscillator: linear dynamics, cubic feedback."""
+    x = np.array(x0, dtype=float)
+    y = np.empty(len(u))
+    for t, ut in enumerate(u[:, 0]):
+        y[t] = x[0]
+        x = np.array([1.5 * x[0] - 0.7 * x[1] - 0.2 * x[0] ** 3 + ut, x[0]])
+    return y
+
+
+@pytest.fixture(scope="module")
+def record():
+    u = 0.4 * np.random.default_rng(0).standard_normal((400, 1))
+    return u, _duffing(u) + 3.0
+
+
+@pytest.fixture(scope="module")
+def periodic():
+    period = 128
+    u, _ = multisine(period, n_periods=3, n_realizations=2, rms=0.4, random_state=1)
+    X = u.reshape(-1, 1)
+    y = np.concatenate([_duffing(r[:, None]) for r in u])
+    return X, y, np.repeat([0, 1], 3 * period), period
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_estimate_x0(name, record):
+    u, y = record
+    y_moving = _duffing(u, x0=(2.0, 1.5)) + 3.0
+    model = FACTORIES[name](n_states=2, estimate_x0=True).fit(u, y_moving)
+    assert np.any(model.x0_ != 0)
+    assert model.n_params_ == model.bla_.n_params_ + _terms_count(model)
+    predicted = model.predict(u)
+    assert rms_error(y_moving[:20], predicted[:20]) < np.std(y_moving)
+
+
+def _terms_count(model):
+    """Parameters beyond those of the (x0-estimating) linear model."""
+    linear = sum(getattr(model, name).size for name in ("A_", "B_", "C_", "D_", "x0_"))
+    return model.n_params_ - linear
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_steady_state_and_frequency_cost(name, periodic):
+    X, y, sequence_id, period = periodic
+    model = FACTORIES[name](n_states=2, period=period, n_transient=period,
+                            cost="frequency").fit(X, y, sequence_id=sequence_id)
+    assert np.all(np.isfinite(model.loss_history_))
+    # Periodic predictions start in steady state: the last period of one
+    # period and of two periods coincide.
+    one = model.predict(X[:period])
+    two = model.predict(np.vstack([X[:period], X[:period]]))
+    np.testing.assert_allclose(one, two[period:], atol=1e-8)
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_stability_penalty_and_weight_decay(name, record):
+    u, y = record
+    plain = FACTORIES[name](n_states=2).fit(u, y)
+    regularised = FACTORIES[name](n_states=2, stability_penalty=10.0,
+                                  weight_decay=0.1).fit(u, y)
+    # The penalised cost is larger than the plain one at the same parameters,
+    # and the search still lowers it.
+    assert regularised.loss_history_[0] > 0
+    assert regularised.loss_history_[-1] <= regularised.loss_history_[0]
+    assert np.all(np.isfinite(regularised.predict(u)))
+    assert np.all(np.isfinite(plain.predict(u)))
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_bla_predicts_and_reports_in_user_units(name, record):
+    u, y = record
+    X = 5.0 * u + 2.0
+    model = FACTORIES[name](n_states=2, validation_fraction=0.0).fit(X, y)
+    bla = model.bla_
+    assert isinstance(bla, BLAEstimator)
+    reference = BLAEstimator(n_states=2).fit(X, y)
+    np.testing.assert_allclose(bla.frf_, reference.frf_, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(bla.predict(X), reference.predict(X),
+                               atol=1e-6 * np.std(y))
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_validation_auto_ranks_starts_on_the_common_end(name, record):
+    u, y = record
+    model = FACTORIES[name](n_states=2, validation_fraction="auto", n_init=3).fit(u, y)
+    assert model.start_losses_.shape == (3,)
+    assert np.isfinite(model.start_losses_).any()
+    assert model.validation_loss_history_ is not None
+
+
+def test_fallback_to_the_linear_model_is_reported(record):
+    u, y = record
+    # Without iterations the starts stay at their starting points: the first
+    # is the linear model itself, the others small random terms around it,
+    # none better than the linear model on the held-out end.
+    with pytest.warns(LinearFallbackWarning, match="linear model is kept"):
+        model = PNLSSRegressor(2, max_iter=0, n_init=3, validation_fraction=0.3,
+                               random_state=0).fit(u, y)
+    assert model.fell_back_to_linear_
+    assert np.all(model.E_ == 0) and np.all(model.F_ == 0)
+    fitted = PNLSSRegressor(2, max_iter=20, validation_fraction=0.3).fit(u, y)
+    assert not fitted.fell_back_to_linear_
+
+
+def test_convergence_warning_from_the_shared_optimiser(record):
+    u, y = record
+    with pytest.warns(ConvergenceWarning, match="max_iter=2"):
+        NLLFRRegressor(n_states=2, max_iter=2, validation_fraction=0.0, n_init=1).fit(u, y)
