@@ -1,9 +1,11 @@
 """Sphinx configuration of the sknlss documentation.
 
-Build with ``sphinx-build -W --keep-going -b html doc doc/_build/html``. The
-build needs no network: intersphinx is not used, and the real Cascaded Tanks
-data are read from ``$SKNLSS_DATA`` when set (the examples fall back to the
-simulated tanks otherwise).
+Build with ``sh doc/build.sh [OUTDIR]`` (``sphinx-build -W --keep-going -b
+html doc OUTDIR``). Neither the build nor the pages need a network:
+intersphinx is not used, MathJax is copied into ``_static/mathjax`` (package
+``sphinx-mathjax-offline``), the theme ships its own scripts and fonts, and
+the real Cascaded Tanks data are read from ``$SKNLSS_DATA`` when set (the
+examples fall back to the simulated tanks otherwise).
 
 The examples gallery runs the example scripts. Which ones run is chosen by the
 environment variable ``SKNLSS_DOCS_EXAMPLES``:
@@ -33,6 +35,9 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.doctest",
     "sphinx.ext.mathjax",
+    # Copies MathJax 3 into _static/mathjax and points mathjax_path at it, so
+    # formulas render without a network (no CDN).
+    "sphinx-mathjax-offline",
     "numpydoc",
     "sphinx_gallery.gen_gallery",
 ]
@@ -103,10 +108,23 @@ sphinx_gallery_conf = {
 }
 
 # --- HTML output ---------------------------------------------------------------
-html_theme = "alabaster"
+html_theme = "pydata_sphinx_theme"
 html_theme_options = {
-    "description": "Nonlinear state-space identification for scikit-learn",
-    "fixed_sidebar": True,
+    "navbar_align": "left",
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    # The page's table of contents only: no "show source" or edit links.
+    "secondary_sidebar_items": ["page-toc"],
+    "footer_start": ["copyright"],
+    "footer_end": ["sphinx-version", "theme-version"],
 }
-html_static_path = []
+# Pages without sub-pages have nothing to show in the left sidebar; leaving it
+# out gives their text and code the width.
+html_sidebars = {
+    page: [] for page in ("index", "install", "user_guide")
+}
+html_static_path = ["_static"]
+# Width of the text column: code lines of 88 characters fit without scrolling.
+html_css_files = ["sknlss.css"]
 html_title = f"sknlss {release}"
+html_show_sourcelink = False
