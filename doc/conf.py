@@ -47,6 +47,8 @@ exclude_patterns = ["_build"]
 root_doc = "index"
 
 # --- API reference -----------------------------------------------------------
+# One page per public name, from the template of its kind in
+# _templates/autosummary/ (class.rst, function.rst, exception.rst).
 autosummary_generate = True
 autodoc_default_options = {"member-order": "bysource"}
 # Members are documented by the class template; numpydoc's member tables would
@@ -101,6 +103,10 @@ sphinx_gallery_conf = {
     "download_all_examples": False,
     "remove_config_comments": True,
     "within_subsection_order": "FileNameSortKey",
+    # "Examples using X" at the end of each API page (the templates'
+    # minigallery directive).
+    "backreferences_dir": "gen_modules/backreferences",
+    "doc_module": ("sknlss",),
     "matplotlib_animations": False,
     # Show what the examples print, not the repr of a cell's last expression
     # (an Axes title, a Legend).
