@@ -22,8 +22,13 @@ environment variable ``SKNLSS_DOCS_EXAMPLES``:
 
 import os
 import re
+import sys
+from pathlib import Path
 
 import sknlss
+
+# Local extensions (the benchmark-result directive).
+sys.path.insert(0, str(Path(__file__).parent / "_ext"))
 
 project = "sknlss"
 author = "The sknlss developers"
@@ -40,10 +45,11 @@ extensions = [
     "sphinx-mathjax-offline",
     "numpydoc",
     "sphinx_gallery.gen_gallery",
+    "benchmark_results",
 ]
 
 templates_path = ["_templates"]
-exclude_patterns = ["_build"]
+exclude_patterns = ["_build", "_generated"]
 root_doc = "index"
 
 # --- API reference -----------------------------------------------------------
@@ -127,7 +133,7 @@ html_theme_options = {
 # Pages without sub-pages have nothing to show in the left sidebar; leaving it
 # out gives their text and code the width.
 html_sidebars = {
-    page: [] for page in ("index", "install", "user_guide")
+    page: [] for page in ("index", "install", "user_guide", "benchmarks")
 }
 html_static_path = ["_static"]
 # Width of the text column: code lines of 88 characters fit without scrolling.
