@@ -1,7 +1,8 @@
 """Sphinx configuration of the sknlss documentation.
 
-Build with ``sh doc/build.sh [OUTDIR]`` (``sphinx-build -W --keep-going -b
-html doc OUTDIR``). Neither the build nor the pages need a network:
+Build with ``sh doc/build.sh [OUTDIR]``, which runs ``sphinx-build -W
+--keep-going -b html doc OUTDIR`` and then checks the pages with
+``doc/check_html.py``. Neither the build nor the pages need a network:
 intersphinx is not used, MathJax is copied into ``_static/mathjax`` (package
 ``sphinx-mathjax-offline``), the theme ships its own scripts and fonts, and
 the real Cascaded Tanks data are read from ``$SKNLSS_DATA`` when set (the
@@ -49,7 +50,8 @@ extensions = [
 ]
 
 templates_path = ["_templates"]
-exclude_patterns = ["_build", "_generated"]
+# sg_execution_times.rst: left by builds that wrote the gallery's timing page.
+exclude_patterns = ["_build", "_generated", "sg_execution_times.rst"]
 root_doc = "index"
 
 # --- API reference -----------------------------------------------------------
@@ -107,6 +109,9 @@ sphinx_gallery_conf = {
     # examples have run, rather than stopping at the first one.
     "abort_on_example_error": False,
     "download_all_examples": False,
+    # The timing pages load jQuery and DataTables from CDNs; the build log
+    # gives the same timings.
+    "write_computation_times": False,
     "remove_config_comments": True,
     "within_subsection_order": "FileNameSortKey",
     # "Examples using X" at the end of each API page (the templates'
