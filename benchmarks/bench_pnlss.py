@@ -15,14 +15,22 @@ Prints, for BLAS limited to 1 and to 2 threads (threadpoolctl):
 The Levenberg-Marquardt step always runs its SVD with one BLAS thread (see
 ``sknlss._optimize``); the thread setting matters for the rest (the BLA).
 
-Run: ``python benchmarks/bench_pnlss.py``
+Run: ``python benchmarks/bench_pnlss.py``; with ``--output FILE`` the printed
+table is also written to FILE, headed by the machine and versions it was
+measured with (the documentation includes
+``doc/_generated/bench_pnlss.txt``).
 """
 
+import argparse
+import contextlib
 import json
+import os
+import platform
 import subprocess
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
@@ -121,12 +129,57 @@ def bench_large(threads):
               f"(before the fit {result['data_mb']:6.1f} MB)")
 
 
-def main():
+class _Tee:
+    """A text stream writing to several streams: the terminal and the results file."""
+
+    def __init__(self, *streams):
+        self._streams = streams
+
+    def write(self, text):
+        for stream in self._streams:
+            stream.write(text)
+        return len(text)
+
+    def flush(self):
+        for stream in self._streams:
+            stream.flush()
+
+
+def _machine():
+    """What the figures depend on: the processor, its cores and the versions."""
+    import numba
+    import scipy
+
+    import sknlss
+
+    return (f"Machine: {platform.machine()} {platform.processor() or platform.system()}, "
+            f"{os.cpu_count()} cores\n"
+            f"Versions: Python {platform.python_version()}, numpy {np.__version__}, "
+            f"scipy {scipy.__version__}, numba {numba.__version__}, "
+            f"sknlss {sknlss.__version__}\n")
+
+
+def run():
     for threads in (1, 2):
         print(f"BLAS threads: {threads}")
         with threadpool_limits(limits=threads, user_api="blas"):
             bench_reference()
         bench_large(threads)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--output", type=Path, metavar="FILE",
+                        help="also write the printed table to FILE")
+    args = parser.parse_args(argv)
+    if args.output is None:
+        run()
+        return
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    with open(args.output, "w", encoding="utf-8") as results:
+        results.write(_machine() + "\n")
+        with contextlib.redirect_stdout(_Tee(sys.stdout, results)):
+            run()
 
 
 if __name__ == "__main__":

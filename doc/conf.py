@@ -1,9 +1,12 @@
 """Sphinx configuration of the sknlss documentation.
 
-Build with ``sphinx-build -W --keep-going -b html doc doc/_build/html``. The
-build needs no network: intersphinx is not used, and the real Cascaded Tanks
-data are read from ``$SKNLSS_DATA`` when set (the examples fall back to the
-simulated tanks otherwise).
+Build with ``sh doc/build.sh [OUTDIR]``, which runs ``sphinx-build -W
+--keep-going -b html doc OUTDIR`` and then checks the pages with
+``doc/check_html.py``. Neither the build nor the pages need a network:
+intersphinx is not used, MathJax is copied into ``_static/mathjax`` (package
+``sphinx-mathjax-offline``), the theme ships its own scripts and fonts, and
+the real Cascaded Tanks data are read from ``$SKNLSS_DATA`` when set (the
+examples fall back to the simulated tanks otherwise).
 
 The examples gallery runs the example scripts. Which ones run is chosen by the
 environment variable ``SKNLSS_DOCS_EXAMPLES``:
@@ -20,8 +23,13 @@ environment variable ``SKNLSS_DOCS_EXAMPLES``:
 
 import os
 import re
+import sys
+from pathlib import Path
 
 import sknlss
+
+# Local extensions (the benchmark-result directive).
+sys.path.insert(0, str(Path(__file__).parent / "_ext"))
 
 project = "sknlss"
 author = "The sknlss developers"
@@ -33,15 +41,22 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.doctest",
     "sphinx.ext.mathjax",
+    # Copies MathJax 3 into _static/mathjax and points mathjax_path at it, so
+    # formulas render without a network (no CDN).
+    "sphinx-mathjax-offline",
     "numpydoc",
     "sphinx_gallery.gen_gallery",
+    "benchmark_results",
 ]
 
 templates_path = ["_templates"]
-exclude_patterns = ["_build"]
+# sg_execution_times.rst: left by builds that wrote the gallery's timing page.
+exclude_patterns = ["_build", "_generated", "sg_execution_times.rst"]
 root_doc = "index"
 
 # --- API reference -----------------------------------------------------------
+# One page per public name, from the template of its kind in
+# _templates/autosummary/ (class.rst, function.rst, exception.rst).
 autosummary_generate = True
 autodoc_default_options = {"member-order": "bysource"}
 # Members are documented by the class template; numpydoc's member tables would
@@ -94,8 +109,15 @@ sphinx_gallery_conf = {
     # examples have run, rather than stopping at the first one.
     "abort_on_example_error": False,
     "download_all_examples": False,
+    # The timing pages load jQuery and DataTables from CDNs; the build log
+    # gives the same timings.
+    "write_computation_times": False,
     "remove_config_comments": True,
     "within_subsection_order": "FileNameSortKey",
+    # "Examples using X" at the end of each API page (the templates'
+    # minigallery directive).
+    "backreferences_dir": "gen_modules/backreferences",
+    "doc_module": ("sknlss",),
     "matplotlib_animations": False,
     # Show what the examples print, not the repr of a cell's last expression
     # (an Axes title, a Legend).
@@ -103,10 +125,23 @@ sphinx_gallery_conf = {
 }
 
 # --- HTML output ---------------------------------------------------------------
-html_theme = "alabaster"
+html_theme = "pydata_sphinx_theme"
 html_theme_options = {
-    "description": "Nonlinear state-space identification for scikit-learn",
-    "fixed_sidebar": True,
+    "navbar_align": "left",
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    # The page's table of contents only: no "show source" or edit links.
+    "secondary_sidebar_items": ["page-toc"],
+    "footer_start": ["copyright"],
+    "footer_end": ["sphinx-version", "theme-version"],
 }
-html_static_path = []
+# Pages without sub-pages have nothing to show in the left sidebar; leaving it
+# out gives their text and code the width.
+html_sidebars = {
+    page: [] for page in ("index", "install", "user_guide", "benchmarks")
+}
+html_static_path = ["_static"]
+# Width of the text column: code lines of 88 characters fit without scrolling.
+html_css_files = ["sknlss.css"]
 html_title = f"sknlss {release}"
+html_show_sourcelink = False

@@ -55,8 +55,8 @@ print("(paper, Table 2: 0.547 V on its estimation part, 0.753 V on the test reco
 # cannot tell noise and nonlinear distortions apart on a single non-periodic
 # record, so one level is drawn (the paper's Fig. 2 uses periodic data for
 # separate levels).
-ax = plot_frf(bla, sampling_time=data.sampling_time)
-ax.set_xscale("log")
+fig = plot_frf(bla, sampling_time=data.sampling_time)
+fig.axes[0].set_xscale("log")
 
 # %%
 # Simulation on the estimation and test records

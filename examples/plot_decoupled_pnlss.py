@@ -93,7 +93,7 @@ ax.legend()
 # %%
 # Test record (paper Fig. 8)
 # --------------------------
-ax = plot_simulation(data.y_test, predictions, sampling_time=data.sampling_time,
-                     unit="V")
-ax.set_title("Test record")
+fig = plot_simulation(data.y_test, predictions, sampling_time=data.sampling_time,
+                      unit="V")
+fig.suptitle("Test record")
 plt.show()

@@ -68,11 +68,11 @@ ax.legend()
 # %%
 # Test record
 # -----------
-ax = plot_simulation(
+fig = plot_simulation(
     data.y_test,
     {name: model.predict(data.X_test) for name, model in models.items()},
     sampling_time=data.sampling_time,
     unit="V",
 )
-ax.set_title("Test record")
+fig.suptitle("Test record")
 plt.show()

@@ -78,9 +78,9 @@ print(f"Chosen on validation: {best_cost} cost; test RMS {rms_pnlss:.2e} "
 # between, while the BLA error shows the nonlinear distortions.
 noise = data.y[test] - data.y_noiseless[test]
 noise_spectrum = np.abs(np.fft.rfft(noise)[1:]) / np.sqrt(noise.size)
-ax = plot_error_spectrum(
+fig = plot_error_spectrum(
     data.y[test],
     {"BLA": bla.predict(data.X[test]), "PNLSS": y_pnlss},
     noise_level=noise_spectrum,
 )
-ax.set_title("Test realization: output and model errors")
+fig.axes[0].set_title("Test realization: output and model errors")

@@ -29,7 +29,7 @@ from .datasets import fetch_cascaded_tanks, fetch_silverbox, make_cascaded_tanks
 from .exceptions import SimulationDivergedWarning
 from .metrics import rms_error
 
-__all__ = ["BENCHMARKS", "Benchmark", "evaluate", "load_benchmark", "reproduce"]
+__all__ = ["Benchmark", "evaluate", "format_table", "load_benchmark", "reproduce"]
 
 
 def _tanks_models():

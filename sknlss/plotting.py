@@ -2,13 +2,19 @@
 
 matplotlib is an optional dependency (``pip install "sknlss[plot]"``); it is
 imported when a function of this module is called, not when the module is
-imported. Every function draws into the Axes it is given, or into a new figure,
-and returns that Axes.
+imported. Every function draws into the Axes it is given (``ax``), or into a
+new figure, and returns the figure it drew into. Legends are placed outside
+the data, to the right of the Axes.
 """
+
+from numbers import Integral, Real
 
 import numpy as np
 
 __all__ = ["plot_frf", "plot_simulation", "plot_error_spectrum"]
+
+# Outside the Axes, top-aligned with its right edge: a legend never hides data.
+_LEGEND_OUTSIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
 
 
 def _pyplot():
@@ -22,47 +28,109 @@ def _pyplot():
     return plt
 
 
-def _new_axes(ax):
-    if ax is None:
-        _, ax = _pyplot().subplots(figsize=(7.0, 4.0), layout="constrained")
+def _check_axes(ax, name="ax"):
+    """``ax`` itself when it is a matplotlib Axes, else a ValueError naming it."""
+    from matplotlib.axes import Axes
+
+    if not isinstance(ax, Axes):
+        raise ValueError(f"{name} must be a matplotlib Axes, got {type(ax).__name__}.")
     return ax
+
+
+def _single_axes(ax):
+    """The given Axes, or the Axes of a new figure sized for an outside legend."""
+    if ax is None:
+        return _pyplot().subplots(figsize=(9.0, 4.0), layout="constrained")[1]
+    return _check_axes(ax)
+
+
+def _check_sampling_time(sampling_time):
+    if sampling_time is None:
+        return None
+    if (isinstance(sampling_time, bool) or not isinstance(sampling_time, Real)
+            or not np.isfinite(sampling_time) or sampling_time <= 0):
+        raise ValueError(
+            f"sampling_time must be a positive finite number, got {sampling_time!r}."
+        )
+    return float(sampling_time)
 
 
 def _frequency_axis(frequencies, sampling_time):
     """Frequencies in Hz when the sampling time is known, else in cycles/sample."""
+    sampling_time = _check_sampling_time(sampling_time)
     if sampling_time is None:
-        return np.asarray(frequencies, dtype=float), "Frequency (cycles/sample)"
-    if not sampling_time > 0:
-        raise ValueError(f"sampling_time must be positive, got {sampling_time}.")
-    return np.asarray(frequencies, dtype=float) / sampling_time, "Frequency (Hz)"
+        return frequencies, "Frequency (cycles/sample)"
+    return frequencies / sampling_time, "Frequency (Hz)"
 
 
-def _select_channel(values, output_index, name):
-    """Column ``output_index`` of a 1-D or 2-D signal, as a 1-D float array."""
-    values = np.asarray(values, dtype=float)
+def _time_axis(n_samples, sampling_time):
+    """Time in seconds when the sampling time is known, else in samples."""
+    sampling_time = _check_sampling_time(sampling_time)
+    if sampling_time is None:
+        return np.arange(n_samples), "Time (samples)"
+    return sampling_time * np.arange(n_samples), "Time (s)"
+
+
+def _check_index(index, name):
+    if isinstance(index, bool) or not isinstance(index, Integral):
+        raise ValueError(f"{name} must be an integer, got {index!r}.")
+    return int(index)
+
+
+def _signal(values, output_index, name, non_finite_hint=""):
+    """Column ``output_index`` of a non-empty, finite 1-D or 2-D signal, as 1-D floats."""
+    output_index = _check_index(output_index, "output_index")
+    try:
+        values = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be an array of numbers.") from exc
+    if values.ndim not in (1, 2):
+        raise ValueError(f"{name} must be 1-D or 2-D, got shape {values.shape}.")
+    if values.size == 0:
+        raise ValueError(f"{name} is empty (shape {values.shape}); it needs samples to draw.")
     if values.ndim == 1:
         if output_index != 0:
             raise ValueError(
                 f"{name} has a single output; output_index must be 0, got {output_index}."
             )
-        return values
-    if values.ndim != 2:
-        raise ValueError(f"{name} must be 1-D or 2-D, got shape {values.shape}.")
-    if not 0 <= output_index < values.shape[1]:
+        column = values
+    elif not 0 <= output_index < values.shape[1]:
         raise ValueError(
             f"output_index={output_index} is out of range for {name} with "
             f"{values.shape[1]} output(s)."
         )
-    return values[:, output_index]
+    else:
+        column = values[:, output_index]
+    n_bad = np.count_nonzero(~np.isfinite(column))
+    if n_bad:
+        raise ValueError(
+            f"{name} has {n_bad} non-finite value(s) (NaN or infinity) among its "
+            f"{column.shape[0]} samples{non_finite_hint}."
+        )
+    return column
 
 
-def _as_predictions(y_pred, label):
-    """Normalise ``y_pred`` (one array, or a mapping label -> array) to a dict."""
+def _measured_and_predictions(y_true, y_pred, output_index, label):
+    """Validated measured output and a dict name -> simulated output of the same length."""
+    measured = _signal(y_true, output_index, "y_true")
     if isinstance(y_pred, dict):
         if not y_pred:
             raise ValueError("y_pred is an empty mapping; give at least one prediction.")
-        return dict(y_pred)
-    return {label: y_pred}
+        named = y_pred
+    else:
+        named = {label: y_pred}
+    predictions = {}
+    for name, values in named.items():
+        argument = f"y_pred[{name!r}]" if isinstance(y_pred, dict) else "y_pred"
+        values = _signal(values, output_index, argument,
+                         "; a diverged simulation cannot be drawn, leave that model out")
+        if values.shape != measured.shape:
+            raise ValueError(
+                f"{argument} has {values.shape[0]} samples, y_true has "
+                f"{measured.shape[0]}; they must be the same record."
+            )
+        predictions[str(name)] = values
+    return measured, predictions
 
 
 def _db(values, power=False):
@@ -71,22 +139,30 @@ def _db(values, power=False):
         return (10.0 if power else 20.0) * np.log10(np.abs(values))
 
 
-def _bla_entry(values, n_freq, output_index, input_index, name):
-    """Entry (output, input) of an FRF-like array of shape (n_freq, n_y, n_u) or (n_freq,)."""
+def _bla_entry(bla, name, n_freq, output_index, input_index):
+    """Entry (output, input) of the finite attribute ``name`` of shape (n_freq, n_y, n_u).
+
+    None when the attribute is absent or None (a level that was not estimated).
+    """
+    values = getattr(bla, name, None)
+    if values is None:
+        return None
     values = np.asarray(values)
-    if values.ndim == 1:
-        return values
-    if values.ndim != 3 or values.shape[0] != n_freq:
+    if values.ndim == 3 and values.shape[0] == n_freq:
+        if not (0 <= output_index < values.shape[1] and 0 <= input_index < values.shape[2]):
+            raise ValueError(
+                f"(output_index, input_index)=({output_index}, {input_index}) is out of "
+                f"range for bla.{name} of shape {values.shape}."
+            )
+        values = values[:, output_index, input_index]
+    elif values.shape != (n_freq,):
         raise ValueError(
-            f"{name} must have shape (n_freq, n_outputs, n_inputs) with n_freq={n_freq}, "
-            f"got {values.shape}."
+            f"bla.{name} must have shape (n_freq, n_outputs, n_inputs) or (n_freq,) "
+            f"with n_freq={n_freq}, got {values.shape}."
         )
-    if not (0 <= output_index < values.shape[1] and 0 <= input_index < values.shape[2]):
-        raise ValueError(
-            f"(output_index, input_index)=({output_index}, {input_index}) is out of range "
-            f"for {name} of shape {values.shape}."
-        )
-    return values[:, output_index, input_index]
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"bla.{name} has non-finite values (NaN or infinity).")
+    return values
 
 
 def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None):
@@ -97,6 +173,7 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
     level (the standard deviation of the FRF due to noise) and the total level
     (noise plus nonlinear distortions). Where the total level lies clearly
     above the noise level, the system behaves nonlinearly at that frequency.
+    The legend is drawn to the right of the Axes.
 
     Parameters
     ----------
@@ -118,8 +195,16 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
 
     Returns
     -------
-    ax : matplotlib.axes.Axes
-        The Axes with the magnitudes in dB against frequency.
+    fig : matplotlib.figure.Figure
+        The figure drawn into (the one holding ``ax`` when given). Its Axes
+        show the magnitudes in dB against frequency.
+
+    Raises
+    ------
+    ValueError
+        If ``bla`` is not fitted, its attributes have inconsistent shapes or
+        non-finite values, an index is out of range, or ``sampling_time`` is
+        not positive.
 
     See Also
     --------
@@ -138,9 +223,10 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
     >>> y = lfilter([0.0, 0.5], [1.0, -1.2, 0.5], u, axis=1)
     >>> y += 0.01 * np.random.default_rng(0).standard_normal(y.shape)
     >>> X, sequence_id = u.reshape(-1, 1), np.repeat([0, 1], u.shape[1])
-    >>> bla = BLAEstimator(n_states=2, period=256).fit(X, y.ravel(), sequence_id=sequence_id)
-    >>> ax = plot_frf(bla, sampling_time=0.01)
-    >>> ax.get_xlabel()
+    >>> bla = BLAEstimator(n_states=2, period=256)
+    >>> bla = bla.fit(X, y.ravel(), sequence_id=sequence_id)
+    >>> fig = plot_frf(bla, sampling_time=0.01)
+    >>> fig.axes[0].get_xlabel()
     'Frequency (Hz)'
     """
     required = ("frequencies_", "frf_", "noise_variance_", "total_variance_")
@@ -150,23 +236,27 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
             "plot_frf needs a fitted BLAEstimator; the object has no attribute(s) "
             f"{', '.join(missing)}."
         )
-    freq, xlabel = _frequency_axis(bla.frequencies_, sampling_time)
-    n_freq = freq.shape[0]
-
-    def entry(name):
-        values = getattr(bla, name, None)
-        if values is None:
-            return None
-        return _bla_entry(values, n_freq, output_index, input_index, name)
-
-    frf, model = entry("frf_"), entry("frf_model_")
-    noise, total = entry("noise_variance_"), entry("total_variance_")
+    output_index = _check_index(output_index, "output_index")
+    input_index = _check_index(input_index, "input_index")
+    frequencies = np.asarray(bla.frequencies_, dtype=float)
+    if frequencies.ndim != 1 or frequencies.size == 0 or not np.all(np.isfinite(frequencies)):
+        raise ValueError(
+            "bla.frequencies_ must be a non-empty 1-D array of finite frequencies, got "
+            f"shape {frequencies.shape}."
+        )
+    freq, xlabel = _frequency_axis(frequencies, sampling_time)
+    frf, model, noise, total = (
+        _bla_entry(bla, name, freq.shape[0], output_index, input_index)
+        for name in ("frf_", "frf_model_", "noise_variance_", "total_variance_")
+    )
+    if frf is None:
+        raise ValueError("plot_frf needs a fitted BLAEstimator; bla.frf_ is None.")
     # The LPM cannot separate noise from distortion and reports the same
     # variance twice; drawing it once avoids suggesting a noise floor.
     if noise is not None and total is not None and np.array_equal(noise, total):
         noise = None
 
-    ax = _new_axes(ax)
+    ax = _single_axes(ax)
     ax.plot(freq, _db(frf), "k.", markersize=4, label="BLA (nonparametric)")
     if model is not None:
         ax.plot(freq, _db(model), "C0-", label="BLA (parametric model)")
@@ -179,16 +269,70 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
     ax.set_ylabel("Magnitude (dB)")
     ax.set_title("Best Linear Approximation")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best")
-    return ax
+    ax.legend(**_LEGEND_OUTSIDE)
+    return ax.figure
+
+
+def _simulation_panels(ax, n_models):
+    """Pairs (output Axes, error Axes) for each model, and whether they are stacked here.
+
+    ``ax`` None or one Axes: its grid cell (a new figure's for None) is divided
+    into a column of 2 * n_models rows sharing the time axis, the given Axes
+    becoming the first output panel. A sequence of Axes is used as given.
+    """
+    if ax is None:
+        _, ax = _pyplot().subplots(figsize=(9.0, 1.0 + 2.2 * n_models),
+                                   layout="constrained")
+    if isinstance(ax, (list, tuple, np.ndarray)):
+        axes = [_check_axes(item, "each element of ax") for item in np.ravel(ax)]
+        if len(axes) != 2 * n_models:
+            raise ValueError(
+                f"ax holds {len(axes)} Axes; with {n_models} model(s) it needs "
+                f"2 * {n_models} = {2 * n_models} (the output, then the error, of each "
+                "model), or a single Axes to divide."
+            )
+        return list(zip(axes[0::2], axes[1::2], strict=True)), False
+    ax = _check_axes(ax)
+    spec = ax.get_subplotspec()
+    if spec is None:
+        raise ValueError(
+            "ax must belong to a grid of subplots (plt.subplots, Figure.add_subplot) "
+            "so that its place can be divided into panels, or be a sequence of "
+            "2 * n_models Axes; got an Axes placed by coordinates."
+        )
+    grid = spec.subgridspec(2 * n_models, 1, height_ratios=(2, 1) * n_models)
+    # The caller's Axes stays in the figure as the first panel, so that what the
+    # caller does to it afterwards (a title, a log scale) still shows.
+    ax.set_subplotspec(grid[0])
+    axes = [ax] + [ax.figure.add_subplot(grid[row], sharex=ax)
+                   for row in range(1, 2 * n_models)]
+    return list(zip(axes[0::2], axes[1::2], strict=True)), True
+
+
+def _view_limits(values, keep, margin_fraction):
+    """Limits showing ``values``, cut at ``keep`` widened by ``margin_fraction`` of its span.
+
+    A simulation that drifts far away would flatten every other curve; the view
+    is then limited around the range that matters (the measurement).
+    """
+    low, high = min(np.min(v) for v in values), max(np.max(v) for v in values)
+    span = keep[1] - keep[0]
+    margin = margin_fraction * span if span > 0 else 1.0
+    low, high = max(low, keep[0] - margin), min(high, keep[1] + margin)
+    pad = 0.05 * (high - low) if high > low else 0.5
+    return low - pad, high + pad
 
 
 def plot_simulation(y_true, y_pred, *, sampling_time=None, output_index=0, unit=None,
                     label="model", ax=None):
-    """Plot a measured output, the simulated output(s) and the model error(s) in time.
+    """Plot a measured output with each model's simulated output and error, one panel each.
 
-    The figure of paper Figs. 7-8: the measured output in black, each model's
-    free-run simulation, and each model's error ``y_true - y_pred``.
+    The figure of paper Figs. 7-8, one model at a time: for every model, a
+    panel with the measured output (black) and the model's free-run
+    simulation, and below it a narrower panel with the model's error
+    ``y_true - y_pred`` and its RMS value in the legend. All panels share the
+    time axis; the output panels share one vertical scale and the error
+    panels another, so that the models compare at a glance.
 
     Parameters
     ----------
@@ -196,27 +340,49 @@ def plot_simulation(y_true, y_pred, *, sampling_time=None, output_index=0, unit=
         Measured output.
     y_pred : array-like of shape (n_samples,) or (n_samples, n_outputs), or dict
         Simulated output, or a mapping from a model name to its simulated
-        output to compare several models.
+        output to compare several models (one pair of panels each, in the
+        mapping's order). Non-finite values (a diverged simulation) are
+        rejected: leave such a model out.
     sampling_time : float, default=None
         Sampling time in seconds; the time axis is in seconds when given,
         otherwise in samples.
     output_index : int, default=0
         Output channel to show when the outputs are 2-D.
     unit : str, default=None
-        Unit of the output for the axis label, e.g. ``"V"``.
+        Unit of the output for the axis labels and the RMS errors, e.g.
+        ``"V"``.
     label : str, default="model"
         Name of the model in the legend when ``y_pred`` is a single array.
-    ax : matplotlib.axes.Axes, default=None
-        Axes to draw into; a new figure is created when None.
+    ax : matplotlib.axes.Axes or sequence of Axes, default=None
+        Where to draw:
+
+        - None: a new figure, 2.2 inches high per model;
+        - one Axes (of a grid of subplots): its place is divided into a
+          column of ``2 * n_models`` panels (output, then error, for each
+          model). The given Axes becomes the first output panel, so a title
+          set on it afterwards heads the column; size the figure for the
+          number of models (about 2 inches per model);
+        - a sequence of ``2 * n_models`` Axes: the output, then the error,
+          of each model in turn, used as they are (their layout and sharing
+          are the caller's).
 
     Returns
     -------
-    ax : matplotlib.axes.Axes
-        The Axes with one line for the measurement and two (output and
-        error) per model. When a simulation leaves the range of the
-        measurement (and zero) by more than half that range, the vertical
-        axis is limited to it, so that a diverging model does not hide the
-        others.
+    fig : matplotlib.figure.Figure
+        The figure drawn into (the one holding ``ax`` when given); its Axes
+        include the ``2 * n_models`` panels. When a simulation leaves the
+        measured range by more than half that range, the output panels are
+        limited to it (and the error panels to the measured span), so that a
+        drifting model does not flatten the others.
+
+    Raises
+    ------
+    ValueError
+        If a signal is empty, not 1-D or 2-D, has non-finite values, or
+        differs in length from ``y_true``; if ``y_pred`` is an empty mapping;
+        if ``output_index`` is out of range or ``sampling_time`` not positive;
+        or if ``ax`` is not an Axes of a grid or does not hold
+        ``2 * n_models`` Axes.
 
     See Also
     --------
@@ -229,47 +395,51 @@ def plot_simulation(y_true, y_pred, *, sampling_time=None, output_index=0, unit=
     >>> import numpy as np
     >>> from sknlss.plotting import plot_simulation
     >>> t = np.arange(200)
-    >>> ax = plot_simulation(np.sin(0.1 * t), 0.9 * np.sin(0.1 * t), sampling_time=4.0)
-    >>> len(ax.get_lines())
-    3
+    >>> y = np.sin(0.1 * t)
+    >>> fig = plot_simulation(y, {"A": 0.9 * y, "B": 1.2 * y}, sampling_time=4.0)
+    >>> len(fig.axes)
+    4
+    >>> fig.axes[1].get_legend().get_texts()[0].get_text()
+    'RMS error 0.0699'
     """
-    measured = _select_channel(y_true, output_index, "y_true")
-    predictions = {
-        name: _select_channel(values, output_index, f"y_pred[{name!r}]")
-        for name, values in _as_predictions(y_pred, label).items()
-    }
-    for name, values in predictions.items():
-        if values.shape != measured.shape:
-            raise ValueError(
-                f"y_pred[{name!r}] has {values.shape[0]} samples, y_true has "
-                f"{measured.shape[0]}."
-            )
-    if sampling_time is None:
-        time, xlabel = np.arange(measured.shape[0]), "Time (samples)"
-    else:
-        if not sampling_time > 0:
-            raise ValueError(f"sampling_time must be positive, got {sampling_time}.")
-        time, xlabel = sampling_time * np.arange(measured.shape[0]), "Time (s)"
+    measured, predictions = _measured_and_predictions(y_true, y_pred, output_index, label)
+    time, xlabel = _time_axis(measured.shape[0], sampling_time)
+    panels, stacked = _simulation_panels(ax, len(predictions))
+    errors = {name: measured - values for name, values in predictions.items()}
+    in_unit = f" ({unit})" if unit else ""
 
-    ax = _new_axes(ax)
-    ax.plot(time, measured, "k-", linewidth=1.2, label="measured")
-    for k, (name, values) in enumerate(predictions.items()):
-        ax.plot(time, values, f"C{k}-", linewidth=1.0, label=name)
-        ax.plot(time, measured - values, f"C{k}:", linewidth=1.0, label=f"{name} error")
-    # A model that drifts far away (or diverges) would flatten the measurement
-    # into a line; the view is then limited around the measured range and zero.
-    low, high = min(np.nanmin(measured), 0.0), max(np.nanmax(measured), 0.0)
-    margin = 0.5 * (high - low) if high > low else 1.0
-    with np.errstate(invalid="ignore"):
-        drawn = np.concatenate([np.concatenate([v, measured - v]) for v in predictions.values()])
-    drawn = drawn[np.isfinite(drawn)]
-    if drawn.size and (drawn.min() < low - margin or drawn.max() > high + margin):
-        ax.set_ylim(low - margin, high + margin)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(f"Output ({unit})" if unit else "Output")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best")
-    return ax
+    output_limits = _view_limits([measured, *predictions.values()],
+                                 (measured.min(), measured.max()), 0.5)
+    largest_error = max(np.max(np.abs(error)) for error in errors.values())
+    span = np.ptp(measured)
+    error_limits = _view_limits([np.array([-largest_error, largest_error])],
+                                (-span, span), 0.0)
+    for k, ((output_ax, error_ax), name) in enumerate(zip(panels, predictions, strict=True)):
+        colour = f"C{k}"
+        output_ax.plot(time, measured, color="k", linewidth=1.0, label="measured")
+        output_ax.plot(time, predictions[name], color=colour, linewidth=1.0,
+                       label=f"{name} (simulated)")
+        output_ax.set_ylim(output_limits)
+        output_ax.set_ylabel(f"Output{in_unit}")
+        rms = np.sqrt(np.mean(errors[name] ** 2))
+        error_ax.axhline(0.0, color="0.6", linewidth=0.8)
+        error_ax.plot(time, errors[name], color=colour, linewidth=1.0,
+                      label=f"RMS error {rms:.3g} {unit or ''}".rstrip())
+        error_ax.set_ylim(error_limits)
+        error_ax.set_ylabel(f"Error{in_unit}")
+        for panel in (output_ax, error_ax):
+            panel.grid(True, alpha=0.3)
+            panel.legend(**_LEGEND_OUTSIDE)
+    all_panels = [panel for pair in panels for panel in pair]
+    if stacked:
+        # One time axis for the column: tick labels and label on the bottom panel only.
+        for panel in all_panels[:-1]:
+            panel.tick_params(labelbottom=False)
+        all_panels[-1].set_xlabel(xlabel)
+    else:
+        for _, error_ax in panels:
+            error_ax.set_xlabel(xlabel)
+    return panels[0][0].figure
 
 
 def plot_error_spectrum(y_true, y_pred, *, noise_level=None, sampling_time=None,
@@ -280,15 +450,16 @@ def plot_error_spectrum(y_true, y_pred, *, noise_level=None, sampling_time=None,
     frequencies (bins 1 to ``n_samples // 2``; the DC bin reflects only the
     offsets), so that white noise of standard deviation ``sigma`` lies around
     ``20 log10(sigma)`` dB. A model whose error spectrum reaches the noise
-    level explains everything but the noise.
+    level explains everything but the noise. The legend is drawn to the right
+    of the Axes.
 
     Parameters
     ----------
     y_true : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Measured output.
+        Measured output, at least 2 samples.
     y_pred : array-like of shape (n_samples,) or (n_samples, n_outputs), or dict
         Simulated output, or a mapping from a model name to its simulated
-        output.
+        output. Non-finite values (a diverged simulation) are rejected.
     noise_level : float or array-like of shape (n_samples // 2,), default=None
         Noise level to draw: a float is the standard deviation of white output
         noise (in output units), drawn as a horizontal line; an array gives
@@ -308,8 +479,17 @@ def plot_error_spectrum(y_true, y_pred, *, noise_level=None, sampling_time=None,
 
     Returns
     -------
-    ax : matplotlib.axes.Axes
-        The Axes with the spectra in dB against frequency.
+    fig : matplotlib.figure.Figure
+        The figure drawn into (the one holding ``ax`` when given). Its Axes
+        show the spectra in dB against frequency.
+
+    Raises
+    ------
+    ValueError
+        If a signal has fewer than 2 samples, non-finite values or a length
+        different from ``y_true``; if ``noise_level`` is not positive and
+        finite or has the wrong shape; if ``output_index`` is out of range or
+        ``sampling_time`` not positive.
 
     See Also
     --------
@@ -323,49 +503,39 @@ def plot_error_spectrum(y_true, y_pred, *, noise_level=None, sampling_time=None,
     >>> from sknlss.plotting import plot_error_spectrum
     >>> rng = np.random.default_rng(0)
     >>> y = np.sin(0.3 * np.arange(256))
-    >>> ax = plot_error_spectrum(y, y + 0.01 * rng.standard_normal(256), noise_level=0.01)
-    >>> [line.get_label() for line in ax.get_lines()]
+    >>> fig = plot_error_spectrum(y, y + 0.01 * rng.standard_normal(256), noise_level=0.01)
+    >>> [line.get_label() for line in fig.axes[0].get_lines()]
     ['measured output', 'model error', 'noise level']
     """
-    measured = _select_channel(y_true, output_index, "y_true")
-    predictions = {
-        name: _select_channel(values, output_index, f"y_pred[{name!r}]")
-        for name, values in _as_predictions(y_pred, label).items()
-    }
+    measured, predictions = _measured_and_predictions(y_true, y_pred, output_index, label)
     n_samples = measured.shape[0]
-    for name, values in predictions.items():
-        if values.shape != measured.shape:
-            raise ValueError(
-                f"y_pred[{name!r}] has {values.shape[0]} samples, y_true has {n_samples}."
-            )
-        if not np.all(np.isfinite(values)):
-            raise ValueError(
-                f"y_pred[{name!r}] contains non-finite values (a diverged simulation?)."
-            )
+    if n_samples < 2:
+        raise ValueError(f"y_true needs at least 2 samples for a spectrum, got {n_samples}.")
     freq, xlabel = _frequency_axis(np.fft.rfftfreq(n_samples)[1:], sampling_time)
+    level = None
+    if noise_level is not None:
+        level = np.asarray(noise_level, dtype=float)
+        if level.shape not in ((), freq.shape):
+            raise ValueError(
+                f"noise_level must be a float or have shape {freq.shape}, got {level.shape}."
+            )
+        if not (np.all(np.isfinite(level)) and np.all(level > 0)):
+            raise ValueError("noise_level must be positive and finite.")
 
     def spectrum(values):
         return _db(np.fft.rfft(values)[1:] / np.sqrt(n_samples))
 
-    ax = _new_axes(ax)
+    ax = _single_axes(ax)
     ax.plot(freq, spectrum(measured), "k.", markersize=3, label="measured output")
     for k, (name, values) in enumerate(predictions.items()):
         ax.plot(freq, spectrum(measured - values), f"C{k}.", markersize=3,
                 label=f"{name} error")
-    if noise_level is not None:
-        level = np.asarray(noise_level, dtype=float)
-        if level.ndim == 0:
-            if not level > 0:
-                raise ValueError(f"noise_level must be positive, got {float(level)}.")
-            ax.axhline(_db(level), color="0.4", linestyle="--", label="noise level")
-        elif level.shape == freq.shape:
-            ax.plot(freq, _db(level), "--", color="0.4", label="noise level")
-        else:
-            raise ValueError(
-                f"noise_level must be a float or have shape {freq.shape}, got {level.shape}."
-            )
+    if level is not None and level.ndim == 0:
+        ax.axhline(_db(level), color="0.4", linestyle="--", label="noise level")
+    elif level is not None:
+        ax.plot(freq, _db(level), "--", color="0.4", label="noise level")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"Amplitude (dB re 1 {unit})" if unit else "Amplitude (dB)")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best")
-    return ax
+    ax.legend(**_LEGEND_OUTSIDE)
+    return ax.figure
