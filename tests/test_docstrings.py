@@ -9,8 +9,7 @@ import pytest
 docscrape = pytest.importorskip("numpydoc.docscrape")
 
 PUBLIC_MODULES = ["sknlss", "sknlss.metrics", "sknlss.signals", "sknlss.datasets",
-                  "sknlss.plotting", "sknlss.model_selection", "sknlss.benchmarks",
-                  "sknlss.exceptions"]
+                  "sknlss.plotting", "sknlss.model_selection", "sknlss.benchmarks"]
 # The command line's entry point, documented in the API reference.
 COMMAND_LINE = {"sknlss.__main__": ["main"]}
 

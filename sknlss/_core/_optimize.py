@@ -24,6 +24,10 @@ _DAMPING_DOWN = 0.5
 # After this many rejected steps in a row the damped step is negligible and the
 # search has stalled: no direction decreases the cost.
 _MAX_REJECTED = 14
+# The iteration limit is worth a warning only when the last tenth of the
+# iterations still improved the loss that selects the iterate by 0.1 %.
+_RECENT_SHARE = 0.1
+_RECENT_GAIN = 1e-3
 
 
 @dataclass
@@ -90,6 +94,27 @@ def _scaled_step_factors(J, r):
     Ur, s, Vt = svd(R[:, :p], full_matrices=False, check_finite=False,
                     lapack_driver="gesdd")
     return s, Vt, col_scale, Ur.T @ R[:, p]
+
+
+def warn_if_still_improving(label, max_iter, losses, validation):
+    """ConvergenceWarning when the iteration limit stopped a search that was
+    still improving: the held-out loss reached a new best in the last tenth of
+    the iterations (the cost, without hold-out), by a relative margin that
+    matters."""
+    window = max(1, int(np.ceil(_RECENT_SHARE * max_iter)))
+    history = np.asarray(losses if validation is None else validation)
+    before = np.min(history[:-window]) if history.size > window else history[0]
+    recent = np.min(history[-window:])
+    if not recent < (1.0 - _RECENT_GAIN) * before:
+        return
+    what = "cost" if validation is None else "held-out loss"
+    warnings.warn(
+        f"{label}: the iteration limit max_iter={max_iter} was reached while the "
+        f"{what} was still improving ({before:.4g} to {recent:.4g} over the last "
+        f"{window} iterations); increase max_iter to refine the fit.",
+        ConvergenceWarning,
+        stacklevel=4,
+    )
 
 
 def _finite_residual(residual, theta):
@@ -212,12 +237,7 @@ def levenberg_marquardt(
     if validation_loss is None:
         best_theta, best_iter = theta, n_iter
     if not converged and max_iter > 0:
-        warnings.warn(
-            f"{label}: the iteration limit max_iter={max_iter} was reached before "
-            "the cost stopped decreasing; increase max_iter to refine the fit.",
-            ConvergenceWarning,
-            stacklevel=3,
-        )
+        warn_if_still_improving(label, max_iter, losses, val_losses)
     return LMResult(
         theta=best_theta,
         loss_history=np.asarray(losses),

@@ -319,9 +319,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     _label = "NLSS2"
 
     def __init__(self, n_states=2, *, alpha=0.3, n_neurons=2, activation="sigmoid",
-                 estimate_x0=False, period=None, cost="time", stability_penalty=0.0,
-                 weight_decay=0.0, refine_linear=False, bla=None, max_iter=100, tol=1e-9,
-                 validation_fraction=0.0, n_iter_no_change=None, n_init=1, n_jobs=None,
+                 estimate_x0=False, period=None, cost="time", stability_penalty=1.0,
+                 weight_decay=0.01, refine_linear=True, bla=None, max_iter=300, tol=1e-9,
+                 validation_fraction="auto", n_iter_no_change=30, n_init=10, n_jobs=None,
                  random_state=None, n_transient=0, verbose=0):
         self.n_states = n_states
         self.alpha = alpha

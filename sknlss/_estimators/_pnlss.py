@@ -52,16 +52,15 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences (PNLSS-I);
         ``predict`` then starts from the fitted ``x0_``.
-    center : bool, default=False
+    center : bool, default=True
         Expand the polynomials around the mean of the signals (zero mean, unit
         standard deviation) instead of around the signals' own zero (only
-        scaled, as in the PNLSS toolbox). By default a polynomial system whose
-        zero is a rest state is exactly representable; centring gives a
-        different model class (no offset terms) that does not depend on the
-        signals' offsets, matches the BLA initialisation to the data's mean
-        level and makes a zero initial state the mean operating point, which
-        matters for records that do not start at rest when x0 is not
-        estimated.
+        scaled, as in the PNLSS toolbox, ``center=False``). Centring gives a
+        model class (no offset terms) that does not depend on the signals'
+        offsets, matches the BLA initialisation to the data's mean level and
+        makes a zero initial state the mean operating point, which matters for
+        records that do not start at rest; without it, a polynomial system
+        whose zero is a rest state is exactly representable.
     refine_linear : bool, default=False
         Before the nonlinear terms are freed, refine A, B, C, D (and x0) on
         the same cost with E = F = 0. This recovers from a poor nonparametric
@@ -78,7 +77,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         weighted by the inverse noise standard deviation (paper eq. 17; needs
         ``period``). The noise variance comes from the variation over the
         periods of each sequence; with one period only the weights are 1.
-    stability_penalty : float, default=0.0
+    stability_penalty : float, default=1.0
         Weight of a penalty on local instability along the fitted trajectory:
         the mean squared excess over 1 of the spectral radius of the state
         map's Jacobian ``A + E dzeta/dx`` at every fitted sample, relative to
@@ -86,7 +85,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         models that are locally contracting wherever the data take the states,
         so that they do not blow up on inputs that push the states a little
         beyond the estimation data. 0 (the paper's cost) disables it.
-    weight_decay : float, default=0.0
+    weight_decay : float, default=0.01
         Weight of the squared size of the polynomial terms, relative to the
         mean squared residual: ``sum_k (c_k e_k)^2`` over the coefficients
         ``e_k`` of E and F, with ``c_k`` the RMS of the k-th monomial along
@@ -99,20 +98,25 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         Maximum number of Levenberg-Marquardt iterations.
     tol : float, default=1e-9
         Relative cost decrease below which the iterations stop.
-    validation_fraction : float, default=0.0
+    validation_fraction : float or "auto", default="auto"
         Fraction at the end of every sequence held out from the cost; the
         iterate with the lowest simulation error there is kept (the held-out
         tail continues the simulation of the fitted part). 0 keeps the last
-        iterate.
+        iterate. ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275
+        and 0.325 in turn and ranks them on the end they all held out (no
+        hold-out for periodic records of a single period).
     n_iter_no_change : int, default=None
         Stop once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
         ``validation_fraction=0``). ``None`` iterates until ``max_iter`` or
         ``tol``.
-    n_init : int, default=1
+    n_init : int, default=5
         Number of starts: the first from the linear model (E = F = 0), the
         others from small random polynomial terms around it; the start with
-        the lowest validation loss (training loss without hold-out) is kept.
+        the lowest simulation error on the held-out end (training cost
+        without hold-out) is kept, unless the linear model does better there:
+        it is then kept instead (``fell_back_to_linear_``, with a
+        :class:`~sknlss.LinearFallbackWarning`).
     n_jobs : int, default=None
         Number of joblib workers for the starts.
     random_state : int, RandomState instance or None, default=None
@@ -120,6 +124,9 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state.
+        Without ``estimate_x0`` and ``period``, the cost also skips the
+        settling time of the linear model's slowest pole (to 1 %, at most a
+        tenth of the shortest sequence): a record rarely starts at rest.
     verbose : int, default=0
         Print the progress of the optimisation.
 
@@ -204,18 +211,18 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         state_terms="full",
         output_terms="full",
         estimate_x0=False,
-        center=False,
+        center=True,
         refine_linear=False,
         period=None,
         cost="time",
-        stability_penalty=0.0,
-        weight_decay=0.0,
+        stability_penalty=1.0,
+        weight_decay=0.01,
         bla=None,
         max_iter=100,
         tol=1e-9,
-        validation_fraction=0.0,
+        validation_fraction="auto",
         n_iter_no_change=None,
-        n_init=1,
+        n_init=5,
         n_jobs=None,
         random_state=None,
         n_transient=0,

@@ -24,7 +24,7 @@ from scipy.linalg import solve_discrete_lyapunov
 from sklearn.exceptions import ConvergenceWarning
 
 from .._core._model import StateSpaceModel
-from .._core._optimize import LMResult, levenberg_marquardt
+from .._core._optimize import LMResult, levenberg_marquardt, warn_if_still_improving
 
 # Spectral radius allowed for any fitted BLA whatever the data: the model must
 # be simulated, so the refinement rejects steps that leave the unit disc with
@@ -290,14 +290,9 @@ def refine_frf(A, B, C, D, frequencies, G, weight, *, max_iter=100, tol=1e-10,
             converged = True
             break
         A, B, C, D = balanced_realization(A, B, C, D)[:4]
-    if not converged:
-        warnings.warn(
-            f"BLA: the iteration limit max_iter={max_iter} was reached before the "
-            "cost stopped decreasing; increase max_iter to refine the fit.",
-            ConvergenceWarning,
-            stacklevel=3,
-        )
     loss_history = np.concatenate(losses) if losses else np.empty(0)
+    if not converged and max_iter > 0:
+        warn_if_still_improving("BLA", max_iter, loss_history, None)
     result = LMResult(theta=np.concatenate([A.ravel(), B.ravel(), C.ravel(), D.ravel()]),
                       loss_history=loss_history, validation_history=None,
                       best_iter=n_iter, n_iter=n_iter, converged=converged)
