@@ -6,14 +6,16 @@ Prints, for BLAS limited to 1 and to 2 threads (threadpoolctl):
   tutorial system: 2 estimation realizations of one period of 1024 samples,
   each preceded by a one-period transient, n = 2, degrees 2-3 "full",
   57 parameters);
-- a 60-iteration fit of that problem, also with the stability penalty and
-  the weight decay switched on;
+- a 60-iteration fit of that problem on the paper's cost with one start (the
+  speed of the kernels and the optimiser), also with the stability penalty
+  and the weight decay switched on, and a fit with the estimator's defaults
+  (five starts, both penalties);
 - a 20-iteration fit at N = 131072 samples (and at N / 4, N / 2 to show how
   time and peak memory scale), each in a fresh process so that the peak
   resident memory belongs to that fit alone.
 
 The Levenberg-Marquardt step always runs its SVD with one BLAS thread (see
-``sknlss._optimize``); the thread setting matters for the rest (the BLA).
+``sknlss._core._optimize``); the thread setting matters for the rest (the BLA).
 
 Run: ``python benchmarks/bench_pnlss.py``; with ``--output FILE`` the printed
 table is also written to FILE, headed by the machine and versions it was
@@ -37,10 +39,14 @@ from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
 from sknlss import PNLSSRegressor
-from sknlss._base import DIVERGENCE_BOUND
-from sknlss._pnlss import _steady_state_rows
-from sknlss._pnlss_kernels import jacobian_pnlss, simulate_pnlss
+from sknlss._core._sequences import steady_state_rows
 from sknlss.datasets import make_pnlss_reference
+
+#: The plain paper's cost and one start: the speed of the kernels and the
+#: optimiser, comparable across versions (the defaults add starts and
+#: penalties, timed separately).
+PLAIN = dict(center=False, stability_penalty=0.0, weight_decay=0.0, n_init=1,
+             validation_fraction=0.0)
 
 
 def _best_time(func, repeat):
@@ -63,26 +69,27 @@ def reference_problem():
 
 def bench_reference():
     X, y, sequence_id, period = reference_problem()
-    model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60)
+    model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60, **PLAIN)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         model.fit(X, y, sequence_id=sequence_id)  # also compiles the kernels
         fit_time = _best_time(lambda: model.fit(X, y, sequence_id=sequence_id), 3)
         staged = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60,
-                                refine_linear=True)
+                                **{**PLAIN, "refine_linear": True})
         staged_time = _best_time(lambda: staged.fit(X, y, sequence_id=sequence_id), 3)
         penalised = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60,
-                                   stability_penalty=1.0, weight_decay=1e-3)
+                                   **{**PLAIN, "stability_penalty": 1.0,
+                                      "weight_decay": 1e-3})
         penalised_time = _best_time(lambda: penalised.fit(X, y, sequence_id=sequence_id), 3)
+        defaults = PNLSSRegressor(2, period=period, n_transient=period)
+        defaults_time = _best_time(lambda: defaults.fit(X, y, sequence_id=sequence_id), 1)
     U = (X - model.u_offset_) / model.u_scale_
-    index, starts, original = _steady_state_rows(np.array([0, period, 2 * period]), period)
+    index, starts, original = steady_state_rows(np.array([0, period, 2 * period]), period)
     U = np.ascontiguousarray(U[index])
     rows = np.where(original, np.cumsum(original) - 1, -1)
-    args = (model.A_, model.B_, model.C_, model.D_, model.E_, model.F_,
-            model.state_exponents_, model.output_exponents_, U, starts)
-    x0 = np.zeros((2, 2))
-    sim = _best_time(lambda: simulate_pnlss(*args, x0, DIVERGENCE_BOUND), 50)
-    jac = _best_time(lambda: jacobian_pnlss(*args, x0, False, DIVERGENCE_BOUND, rows), 50)
+    simulated, theta = model._fitted_model()
+    sim = _best_time(lambda: simulated.simulate(theta, U, starts), 50)
+    jac = _best_time(lambda: simulated.sensitivities(theta, U, starts, rows), 50)
     print(f"  reference problem: {U.shape[0]} simulated samples, "
           f"{model.n_params_} parameters")
     print(f"  one simulation                  {1e3 * sim:8.2f} ms")
@@ -92,6 +99,7 @@ def bench_reference():
     print(f"  same with refine_linear=True    {staged_time:8.2f} s")
     print(f"  same with both penalties        {penalised_time:8.2f} s   "
           f"({penalised.n_iter_} iterations)")
+    print(f"  defaults (5 starts, penalties)  {defaults_time:8.2f} s")
 
 
 _LARGE_FIT = """
@@ -105,7 +113,9 @@ n_samples, threads = int(sys.argv[1]), int(sys.argv[2])
 period = 1024
 data = make_pnlss_reference(n_realizations=n_samples // (2 * period), n_periods=2)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=20)
+model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=20, center=False,
+                       stability_penalty=0.0, weight_decay=0.0, n_init=1,
+                       validation_fraction=0.0)
 with threadpool_limits(limits=threads, user_api="blas"), warnings.catch_warnings():
     warnings.simplefilter("ignore", ConvergenceWarning)
     start = time.perf_counter()

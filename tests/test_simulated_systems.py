@@ -133,8 +133,9 @@ def test_fast(make):
                                          (make_closed_loop_drive, 0.1)],
                          ids=["duffing", "bouc_wen", "closed_loop_drive"])
 def test_integration_is_accurate(make, scale):
+    substeps = inspect.signature(make).parameters["n_substeps"].default
     default, fine = (make(**SMALL, random_state=0, noise_std=0.0, n_substeps=m)
-                     for m in (20, 80))
+                     for m in (substeps, 4 * substeps))
     difference = np.abs(default.y_est - fine.y_est).max()
     assert difference < scale * make(**SMALL).noise_std
 
@@ -162,9 +163,11 @@ def test_closed_loop_drive_tracks_its_reference():
     data = make_closed_loop_drive(random_state=0)
     assert data.u_plant_est.shape == (6000,) and data.u_plant_test.shape == (3000,)
     for X, y in ((data.X_est, data.y_est), (data.X_test, data.y_test)):
+        # The reference reaches half the loop's bandwidth: the position
+        # follows it, with a visible tracking error.
         error = X[:, 0] - y
-        assert np.abs(error).max() < 0.1 * np.ptp(X)
-        assert np.corrcoef(X[:, 0], y)[0, 1] > 0.99
+        assert 0.1 * np.std(X) < np.std(error) < 0.7 * np.std(X)
+        assert np.corrcoef(X[:, 0], y)[0, 1] > 0.8
     # A force a linear motor can deliver.
     assert 5.0 < np.abs(data.u_plant_est).max() < 200.0
 

@@ -441,6 +441,49 @@ def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, sp
     return out
 
 
+@njit(
+    _F1(_F1, _INT, _INT, _INT, _INT, _I1, _INT, _F2, types.FunctionType(EVALUATE),
+        types.FunctionType(STATE_JACOBIAN), types.FunctionType(PARAMETER_JACOBIAN)),
+    cache=True,
+)
+def parameter_rms(theta, n_states, n_outputs, n_terms, n_state_terms, spec, work_size, S,
+                  evaluate, state_jacobian, parameter_jacobian):
+    """RMS over the points ``S`` of the direct derivative of ``h`` with respect
+    to each of the terms' parameters (the size of each parameter's
+    contribution per unit of the parameter).
+
+    Returns
+    -------
+    rms : ndarray of shape (n_terms,)
+    """
+    n, n_y = n_states, n_outputs
+    o_terms = _linear_part(theta, n, S.shape[1] - n, n_y)[4]
+    theta_terms = theta[o_terms : o_terms + n_terms]
+    h = np.empty(n + n_y)
+    dh_dx = np.empty((n + n_y, n))
+    work = np.empty(work_size)
+    state_out = np.empty((n, n_state_terms))
+    output_out = np.empty((n_y, n_terms))
+    s = np.empty(S.shape[1])
+    total = np.zeros(n_terms)
+    for t in range(S.shape[0]):
+        s[:] = S[t]
+        state_out[:] = 0.0
+        output_out[:] = 0.0
+        evaluate(theta_terms, spec, s, n, h, work)
+        state_jacobian(theta_terms, spec, s, n, dh_dx, work)
+        parameter_jacobian(theta_terms, spec, s, n, work, state_out, 0, output_out, 0)
+        for k in range(n_terms):
+            acc = 0.0
+            for i in range(n_y):
+                acc += output_out[i, k] ** 2
+            if k < n_state_terms:
+                for i in range(n):
+                    acc += state_out[i, k] ** 2
+            total[k] += acc
+    return np.sqrt(total / max(S.shape[0], 1))
+
+
 # ---------------------------------------------------------------- no terms
 @njit(EVALUATE, cache=True)
 def no_terms_evaluate(theta_terms, spec, s, n_states, h, work):

@@ -47,13 +47,9 @@ class Terms:
         """Number of parameters of the terms."""
         return int(sum(np.prod(shape, dtype=np.int64) for _, shape in self.blocks))
 
-    def decay_scale(self, theta_terms, S):
-        """Scale of the weight decay of each parameter (0: not decayed).
-
-        ``S`` holds the points ``[x; u]`` of the fitted samples along the
-        initial model's trajectory.
-        """
-        return np.zeros(self.n_params)
+    def decay_mask(self):
+        """Which of the terms' parameters the weight decay acts on (all by default)."""
+        return np.ones(self.n_params, dtype=bool)
 
 
 def _pointers(terms):
@@ -184,4 +180,14 @@ class StateSpaceModel:
             self.n_terms, terms.n_state_params, _array(terms.spec, np.int64), terms.work_size,
             _array(S),
             _array(G), float(step), *_pointers(terms),
+        )
+
+    def parameter_rms(self, theta, S):
+        """RMS over the points ``S = [x; u]`` of the direct derivative of the terms
+        with respect to each of their parameters, shape (n_terms,)."""
+        terms = self.terms
+        return _kernels.parameter_rms(
+            _array(theta), self.n_states, self.n_outputs, self.n_terms,
+            terms.n_state_params, _array(terms.spec, np.int64), terms.work_size, _array(S),
+            *_pointers(terms),
         )

@@ -50,7 +50,7 @@ def fit_from(problem, candidates, *, label, **options):
     candidates : iterable of ndarray
         Starting points, tried in turn until one gives a finite residual and
         Jacobian (e.g. a model, then the same with its nonlinear terms
-        shrunk).
+        shrunk). With weight decay, its scale is set from the point used.
     label : str
         Prefix of the progress lines and warnings.
     **options
@@ -63,6 +63,9 @@ def fit_from(problem, candidates, *, label, **options):
     result : LMResult
     """
     for theta0 in candidates:
+        if getattr(problem, "weight_decay", 0):
+            # The decay weighs each term's contribution from this start.
+            problem.set_decay_scale(theta0)
         initial = problem.residual(theta0, True)
         if _finite(*initial):
             break

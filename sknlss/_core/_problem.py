@@ -189,9 +189,14 @@ class SimulationErrorProblem:
         state map's local Jacobian ``A + dh_x/dx`` at the fitted samples,
         relative to the mean squared residual.
     weight_decay : float, default=0.0
-        Weight of the squared size of the terms' parameters (scaled by
-        ``model.terms.decay_scale`` along the initial trajectory, see
-        :meth:`set_decay_scale`), relative to the mean squared residual.
+        Weight of the squared size of the terms' contributions, added to the
+        sum of squared residuals: each parameter the terms decay
+        (``decay_mask``) is scaled by the RMS of its direct effect on the
+        terms along the trajectory of the starting point (see
+        :meth:`set_decay_scale`), so that the decay does not depend on the
+        units of the signals or the parametrisation. Like a prior, its weight
+        does not grow with the number of samples: it matters on short records
+        and fades on long ones.
     x0 : ndarray of shape (n_states,), default=None
         Initial state of every sequence when the model does not estimate it
         (zero when None).
@@ -231,15 +236,20 @@ class SimulationErrorProblem:
         """Outputs, states and the divergence flag over the simulated rows."""
         return self.model.simulate(theta, self.U, self.starts, self.x0)
 
+    def simulate_input(self, theta, U):
+        """Outputs, states and divergence flag for another input on the same rows."""
+        return self.model.simulate(theta, U, self.starts, self.x0)
+
     def _fitted_points(self, X):
         """``[x; u]`` at the cost rows, from the simulated states X."""
         return np.hstack([X, self.U])[self.fit_rows]
 
     def set_decay_scale(self, theta):
         """Fix the scale of the weight decay from the trajectory of ``theta``
-        (the initial model)."""
+        (the starting point)."""
         points = self._fitted_points(self.simulate(theta)[1])
-        scale = self.model.terms.decay_scale(theta[self.model.terms_columns], points)
+        points = points[np.all(np.isfinite(points), axis=1)]
+        scale = self.model.parameter_rms(theta, points) * self.model.terms.decay_mask()
         self.decay_scale = np.nan_to_num(scale)
 
     # ------------------------------------------------------------- residual
@@ -269,7 +279,7 @@ class SimulationErrorProblem:
         if self.stability_penalty:
             extra.append(self._stability_rows(theta, X, r.size, jacobian))
         if self.weight_decay:
-            extra.append(self._decay_rows(theta, r.size, jacobian))
+            extra.append(self._decay_rows(theta, jacobian))
         if extra:
             r = np.concatenate([r] + [rows for rows, _ in extra])
             if jacobian:
@@ -306,13 +316,13 @@ class SimulationErrorProblem:
                 theta, S[active], G, _PENALTY_STEP)
         return rows, J
 
-    def _decay_rows(self, theta, n_residuals, jacobian):
+    def _decay_rows(self, theta, jacobian):
         """Rows of the weight decay (scaled terms' parameters) and their Jacobian."""
         if self.decay_scale is None:
             self.set_decay_scale(theta)
         decayed = np.flatnonzero(self.decay_scale)
         columns = self.model.terms_columns[decayed]
-        weight = np.sqrt(self.weight_decay * n_residuals) * self.decay_scale[decayed]
+        weight = np.sqrt(self.weight_decay) * self.decay_scale[decayed]
         rows = weight * theta[columns]
         if not jacobian:
             return rows, None

@@ -125,24 +125,31 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     cost : {"time", "frequency"}, default="time"
         Time-domain simulation error, or its per-period DFT weighted by the
         inverse noise standard deviation (paper eq. 17; needs ``period``).
-    stability_penalty : float, default=0.0
+    stability_penalty : float, default=1.0
         Weight of a penalty on local instability along the fitted trajectory:
         the mean squared excess over 1 of the spectral radius of the state
         map's Jacobian ``A + W_x diag(g'(V^T s)) V_x^T`` at every fitted
         sample, relative to the mean squared residual.
-    weight_decay : float, default=0.0
-        Weight of the squared size of the branches, relative to the mean
-        squared residual: the output directions W and the branch
-        coefficients, each coefficient scaled by the RMS of its power of the
-        branch input along the initial trajectory.
+    weight_decay : float, default=10.0
+        Weight of a penalty on the size of the branches (their output directions W and coefficients), added to the sum of squared
+        residuals (normalised units): ``sum_k (c_k theta_k)^2``, with ``c_k``
+        the RMS of the direct effect of parameter k on the model's equations
+        along the trajectory of the starting point, so that it acts on each
+        term's contribution whatever the units. Like a prior, it does not grow
+        with the record: it restrains the terms on a short record and fades on
+        a long one.
     max_iter : int, default=100
         Maximum number of Levenberg-Marquardt iterations of the re-optimisation.
     tol : float, default=1e-9
         Relative cost decrease below which the iterations stop.
-    validation_fraction : float, default=0.0
+    validation_fraction : float or "auto", default="auto"
         Fraction at the end of every sequence held out from the cost; the
-        iterate with the lowest simulation error there is kept. 0 keeps the
-        last iterate.
+        iterate with the lowest simulation error there is kept (the held-out
+        tail continues the simulation of the fitted part). 0 keeps the last
+        iterate. ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275
+        and 0.325 in turn and ranks them on the end they all held out (no
+        hold-out with ``period``: periodic records are fitted in whole
+        periods).
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
@@ -150,17 +157,22 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``tol``.
     n_restarts : int, default=10
         Number of random initialisations of the CPD within one start.
-    n_init : int, default=1
+    n_init : int, default=5
         Number of starts: decouplings with independent random sampling points
-        and CPD initialisations, each followed by the re-optimisation. The
-        start with the lowest validation loss (training loss without
-        hold-out) is kept; the PNLSS model is fitted once.
+        and CPD initialisations, each followed by the re-optimisation; the
+        PNLSS model is fitted once. The start with the lowest simulation error
+        on the held-out end is kept, unless the PNLSS model's linear part does
+        better there (it is then kept instead, see ``fell_back_to_linear_``).
     n_jobs : int or None, default=None
         Number of joblib workers for the starts.
     random_state : int, RandomState instance or None, default=None
         Seeds the sampling points and the CPD initialisations.
     n_transient : int, default=0
-        Samples per sequence excluded from the cost and the score.
+        Samples per sequence excluded from the cost and the score; with
+        ``period``, the number of samples prepended for the steady state.
+        Without ``estimate_x0`` and ``period``, the cost also skips the
+        settling time of the linear model's slowest pole (to 1 %, at most a
+        tenth of the shortest sequence).
     verbose : int, default=0
         Print the progress of the optimisation.
 
@@ -202,6 +214,16 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Mean squared simulation error on the held-out rows per iteration.
     best_iteration_ : int
         Iteration whose parameters were kept.
+    start_losses_ : ndarray of shape (n_init,)
+        Mean squared simulation error of every start on the end of the
+        sequences that all starts held out (``inf`` for a start that failed or
+        that ran away on the enlarged estimation input).
+    fell_back_to_linear_ : bool
+        True when no start beat the linear model there: the linear model is
+        kept (its nonlinear terms are zero) and a
+        :class:`~sknlss.LinearFallbackWarning` is issued.
+    fit_transient_ : int
+        Samples per sequence left out of the cost (see ``n_transient``).
     n_features_in_ : int
         Number of inputs seen during ``fit``.
     u_offset_, u_scale_ : ndarray of shape (n_inputs,)
@@ -270,7 +292,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         period=None,
         cost="time",
         stability_penalty=1.0,
-        weight_decay=0.01,
+        weight_decay=10.0,
         max_iter=100,
         tol=1e-9,
         validation_fraction="auto",
@@ -357,8 +379,6 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
 
     def _prepare_starts(self, context):
         pnlss, starts, rows = self.pnlss_, context["starts"], context["rows"]
-        if self.weight_decay:
-            context["problem"].set_decay_scale(context["theta"])
         X = context["U"] * self.u_scale_ + self.u_offset_
         sequence_id = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
         states = pnlss.simulate(X, sequence_id=sequence_id, return_states=True)[1]

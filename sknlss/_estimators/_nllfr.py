@@ -143,9 +143,13 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         map's Jacobian at every fitted sample, relative to the mean squared
         residual.
     weight_decay : float, default=0.0
-        Weight of the squared size of the branches (Bw, Dw and the
-        coefficients, each scaled by the RMS of its basis function along the
-        initial trajectory), relative to the mean squared residual.
+        Weight of a penalty on the size of the branches (Bw, Dw and the coefficients), added to the sum of squared
+        residuals (normalised units): ``sum_k (c_k theta_k)^2``, with ``c_k``
+        the RMS of the direct effect of parameter k on the model's equations
+        along the trajectory of the starting point, so that it acts on each
+        term's contribution whatever the units. Like a prior, it does not grow
+        with the record: it restrains the terms on a short record and fades on
+        a long one.
     refine_linear : bool, default=False
         Refine A, B, C, D (and x0) on the simulation error before the
         branches are initialised.
@@ -157,15 +161,23 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         Maximum number of Levenberg-Marquardt iterations of each start.
     tol : float, default=1e-9
         Relative cost decrease below which the iterations stop.
-    validation_fraction : float, default=0.0
+    validation_fraction : float or "auto", default="auto"
         Fraction at the end of every sequence held out from the cost; the
-        iterate (and start) with the lowest simulation error there is kept.
+        iterate with the lowest simulation error there is kept (the held-out
+        tail continues the simulation of the fitted part). 0 keeps the last
+        iterate. ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275
+        and 0.325 in turn and ranks them on the end they all held out (no
+        hold-out with ``period``: periodic records are fitted in whole
+        periods).
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (no effect without hold-out).
-    n_init : int, default=1
+    n_init : int, default=5
         Number of starts: the first with the branch inputs along the BLA's
-        outputs, the others in random directions.
+        outputs, the others in random directions. The start with the lowest
+        simulation error on the held-out end is kept, unless the linear model
+        does better there (it is then kept instead, see
+        ``fell_back_to_linear_``).
     n_jobs : int, default=None
         Number of joblib workers for the starts.
     random_state : int, RandomState instance or None, default=None
@@ -173,6 +185,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state.
+        Without ``estimate_x0`` and ``period``, the cost also skips the
+        settling time of the linear model's slowest pole (to 1 %, at most a
+        tenth of the shortest sequence): a record rarely starts at rest.
     verbose : int, default=0
         Print the progress of the optimisation.
 
@@ -207,6 +222,16 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         Held-out loss per iteration.
     best_iteration_ : int
         Iteration whose parameters were kept.
+    start_losses_ : ndarray of shape (n_init,)
+        Mean squared simulation error of every start on the end of the
+        sequences that all starts held out (``inf`` for a start that failed or
+        that ran away on the enlarged estimation input).
+    fell_back_to_linear_ : bool
+        True when no start beat the linear model there: the linear model is
+        kept (its nonlinear terms are zero) and a
+        :class:`~sknlss.LinearFallbackWarning` is issued.
+    fit_transient_ : int
+        Samples per sequence left out of the cost (see ``n_transient``).
     n_features_in_ : int
         Number of inputs.
     u_offset_, u_scale_, y_offset_, y_scale_ : ndarray
@@ -290,14 +315,6 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         # simulated output unchanged.
         per_branch = 2 if isinstance(self._basis(), PolynomialBasis) else 1
         return model.n_states**2 + per_branch * self.n_branches
-
-    def _prepare_starts(self, context):
-        if self.weight_decay:
-            problem, model = context["problem"], context["model"]
-            V, W, c = _least_squares_terms(problem, context["theta"],
-                                           self._directions(context, 0, context["seeds"][0]))
-            values = model.unpack(context["theta"])
-            problem.set_decay_scale(model.pack(dict(values, V=V, W=W, coefficients=c)))
 
     def _directions(self, context, start, seed):
         """Branch directions V of a start: along the outputs of the linear

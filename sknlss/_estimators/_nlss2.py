@@ -32,6 +32,9 @@ from ._nonlinear import _BaseNonlinearStateSpace, holdout_loss
 ALPHA_GRID = np.logspace(-2, 3, 6)
 
 _MLP_ACTIVATION = {"sigmoid": "logistic", "tanh": "tanh"}
+# The networks' static regression uses at most this many samples (drawn at
+# random from the estimated states of a longer record).
+_MAX_REGRESSION_SAMPLES = 4000
 
 
 # ------------------------------------------------------ static initialisation
@@ -61,6 +64,11 @@ def _fit_networks(states, U, Y, starts, linear, n_neurons, activation, random_st
     rng = check_random_state(random_state)
     W, b, v, c = [], [], [], []
     for inputs, target in targets:
+        if len(target) > _MAX_REGRESSION_SAMPLES:
+            # A starting point needs no more: a long record costs minutes of
+            # L-BFGS otherwise.
+            keep = rng.choice(len(target), _MAX_REGRESSION_SAMPLES, replace=False)
+            inputs, target = inputs[keep], target[keep]
         net = MLPRegressor(
             hidden_layer_sizes=(n_neurons,), activation=_MLP_ACTIVATION[activation],
             solver="lbfgs", max_iter=500, random_state=rng.randint(np.iinfo(np.int32).max),
@@ -162,12 +170,16 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         the mean squared excess over 1 of the spectral radius of the state
         map's Jacobian ``A + df_NL/dx`` at every fitted sample, relative to the
         mean squared residual.
-    weight_decay : float, default=0.0
-        Weight of the squared norm of the networks' weights (not their
-        biases) added to the simulation-error cost, relative to the mean
-        squared residual. It keeps the sigmoids smooth where the data are
-        short, so that the model extrapolates more gently.
-    refine_linear : bool, default=False
+    weight_decay : float, default=10.0
+        Weight of a penalty on the size of the networks' weights (not their
+        biases), added to the sum of squared residuals (normalised units):
+        ``sum_k (c_k theta_k)^2``, with ``c_k``
+        the RMS of the direct effect of parameter k on the model's equations
+        along the trajectory of the starting point, so that it acts on each
+        term's contribution whatever the units. Like a prior, it does not grow
+        with the record: it restrains the terms on a short record and fades on
+        a long one.
+    refine_linear : bool, default=True
         Before estimating the states, refine the linear model by minimising
         its simulation error (with its own initial state when
         ``estimate_x0``), keeping the iterate best on the validation rows.
@@ -181,24 +193,33 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         Maximum number of Levenberg-Marquardt iterations of each start.
     tol : float, default=1e-9
         Relative decrease of the cost below which the search stops.
-    validation_fraction : float in [0, 1), default=0.0
+    validation_fraction : float or "auto", default="auto"
         Fraction at the end of every sequence held out to select ``alpha``,
         the iteration and the start. ``0`` selects on the training cost.
+        ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275 and
+        0.325 in turn and ranks them on the end they all held out (no
+        hold-out with ``period``: periodic records are fitted in whole
+        periods).
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
         ``validation_fraction=0``). ``None`` iterates until ``max_iter`` or
         ``tol``.
-    n_init : int, default=1
-        Number of random initialisations of the networks, optimised in
-        parallel; the best one is kept.
+    n_init : int, default=5
+        Number of random initialisations of the networks; the start with the
+        lowest simulation error on the held-out end is kept, unless the
+        linear model does better there (it is then kept instead, see
+        ``fell_back_to_linear_``).
     n_jobs : int or None, default=None
         Number of joblib workers for the starts.
     random_state : int, RandomState instance or None, default=None
         Seeds the network initialisations.
     n_transient : int, default=0
-        Samples at the start of every sequence excluded from the cost and
-        from ``score``.
+        Samples per sequence excluded from the cost and the score; with
+        ``period``, the number of samples prepended for the steady state.
+        Without ``estimate_x0`` and ``period``, the cost also skips the
+        settling time of the linear model's slowest pole (to 1 %, at most a
+        tenth of the shortest sequence).
     verbose : int, default=0
         Print the progress of the optimisation when positive.
 
@@ -242,6 +263,16 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         Validation loss per iteration, when ``validation_fraction > 0``.
     best_iteration_ : int
         Iteration of the kept start whose parameters were kept.
+    start_losses_ : ndarray of shape (n_init,)
+        Mean squared simulation error of every start on the end of the
+        sequences that all starts held out (``inf`` for a start that failed or
+        that ran away on the enlarged estimation input).
+    fell_back_to_linear_ : bool
+        True when no start beat the linear model there: the linear model is
+        kept (its nonlinear terms are zero) and a
+        :class:`~sknlss.LinearFallbackWarning` is issued.
+    fit_transient_ : int
+        Samples per sequence left out of the cost (see ``n_transient``).
     bla_ : BLAEstimator
         The fitted linear model of the initialisation (fitted on the rows
         before the held-out tails); it predicts and reports its FRF in the
@@ -319,9 +350,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     _label = "NLSS2"
 
     def __init__(self, n_states=2, *, alpha=0.3, n_neurons=2, activation="sigmoid",
-                 estimate_x0=False, period=None, cost="time", stability_penalty=1.0,
-                 weight_decay=0.01, refine_linear=True, bla=None, max_iter=300, tol=1e-9,
-                 validation_fraction="auto", n_iter_no_change=30, n_init=10, n_jobs=None,
+                 estimate_x0=False, period=None, cost="time", stability_penalty=0.0,
+                 weight_decay=10.0, refine_linear=True, bla=None, max_iter=100, tol=1e-9,
+                 validation_fraction="auto", n_iter_no_change=None, n_init=5, n_jobs=None,
                  random_state=None, n_transient=0, verbose=0):
         self.n_states = n_states
         self.alpha = alpha
@@ -358,8 +389,6 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         fit_mask = rows.fit_rows[rows.original]
         context["U_fit"], context["Y_fit"], context["starts_fit"] = part_before_holdout(
             context["U"], context["Y"], context["starts"], fit_mask)
-        if self.weight_decay:
-            problem.set_decay_scale(context["theta"])
         if self.alpha == "auto":
             # The same network seed for every candidate (paper §4.2).
             seed = check_random_state(self.random_state).randint(np.iinfo(np.int32).max)

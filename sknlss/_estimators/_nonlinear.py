@@ -47,6 +47,10 @@ _AUTO_SHARES = (0.25, 0.3, 0.35, 0.275, 0.325)
 #: share of the shortest sequence.
 _SETTLED = 1e-2
 _MAX_TRANSIENT_SHARE = 0.1
+#: A selected model must stay within ten times the measured output's range
+#: when the estimation input is enlarged by a fifth (see ``stays_bounded``).
+_GUARD_GAIN = 1.2
+_GUARD_RANGE = 10.0
 
 
 class _BaseNonlinearStateSpace(_BaseStateSpace):
@@ -167,9 +171,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         """The held-out share of every start."""
         if self.validation_fraction != "auto":
             return [float(self.validation_fraction)] * self.n_init
-        lengths = np.diff(starts)
-        if self.period is not None and np.min(lengths) < 2 * self.period:
-            # Periodic records of one period: no whole period can be held out.
+        if self.period is not None:
+            # Periodic records are fitted in whole periods: the starts are
+            # ranked on the cost (hold out whole periods or realizations by
+            # hand, e.g. as a separate record).
             return [0.0] * self.n_init
         return [_AUTO_SHARES[i % len(_AUTO_SHARES)] for i in range(self.n_init)]
 
@@ -212,8 +217,6 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         context = {"problem": problem, "model": model, "theta": theta, "U": U, "Y": Y,
                    "starts": starts, "rows": problem.rows, "seeds": seeds}
         self._prepare_starts(context)
-        for other in problems.values():
-            other.decay_scale = problem.decay_scale
         options = self._lm_options(model)
         outcomes = run_starts(
             _fit_start,
@@ -225,9 +228,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         failures = [outcome for outcome in outcomes if isinstance(outcome, Exception)]
         if len(failures) == len(outcomes):
             raise failures[0]
-        # Every start is judged on the end that all of them held out.
+        # Every start is judged on the end that all of them held out; a start
+        # that blows up on a larger copy of the estimation input is out.
         common = problems[min(shares)]
-        losses = [np.inf if isinstance(outcome, Exception) else holdout_loss(common, outcome[0])
+        losses = [np.inf if isinstance(outcome, Exception)
+                  or not stays_bounded(common, outcome[0]) else holdout_loss(common, outcome[0])
                   for outcome in outcomes]
         best = int(np.argmin(losses))
         theta_best, result = outcomes[best]
@@ -273,6 +278,25 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
     """One start: the estimator's candidates, then Levenberg-Marquardt on ``problem``."""
     candidates = estimator._starting_points(context, start, seed)
     return fit_from(problem, candidates, label=label, **options)
+
+
+def stays_bounded(problem, theta):
+    """Whether the model stays bounded on the fitted records' input enlarged
+    ``_GUARD_GAIN`` times about its mean: its output may not leave
+    ``_GUARD_RANGE`` times the range of the measured output.
+
+    Models fitted on short records often run away as soon as the input leaves
+    the estimation amplitude, while a model in its class that does not is
+    nearly as good on the data; the check keeps such models out of the
+    selection (the linear model it falls back on is stable).
+    """
+    U = problem.U
+    mean = U.mean(axis=0)
+    Y, _, diverged = problem.simulate_input(theta, mean + _GUARD_GAIN * (U - mean))
+    if diverged:
+        return False
+    span = np.max(np.abs(problem.Y - problem.Y.mean(axis=0)), axis=0)
+    return bool(np.all(np.abs(Y - problem.Y.mean(axis=0)) <= _GUARD_RANGE * span))
 
 
 def holdout_loss(problem, theta):

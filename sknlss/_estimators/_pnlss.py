@@ -85,11 +85,14 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         models that are locally contracting wherever the data take the states,
         so that they do not blow up on inputs that push the states a little
         beyond the estimation data. 0 (the paper's cost) disables it.
-    weight_decay : float, default=0.01
-        Weight of the squared size of the polynomial terms, relative to the
-        mean squared residual: ``sum_k (c_k e_k)^2`` over the coefficients
-        ``e_k`` of E and F, with ``c_k`` the RMS of the k-th monomial along
-        the trajectory of the initial (linear) model.
+    weight_decay : float, default=10.0
+        Weight of a penalty on the size of the polynomial terms (the coefficients of E and F), added to the sum of squared
+        residuals (normalised units): ``sum_k (c_k theta_k)^2``, with ``c_k``
+        the RMS of the direct effect of parameter k on the model's equations
+        along the trajectory of the starting point, so that it acts on each
+        term's contribution whatever the units. Like a prior, it does not grow
+        with the record: it restrains the terms on a short record and fades on
+        a long one.
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
         this model's ``n_states``, ``estimate_x0`` and (if its own is None)
@@ -104,7 +107,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         tail continues the simulation of the fitted part). 0 keeps the last
         iterate. ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275
         and 0.325 in turn and ranks them on the end they all held out (no
-        hold-out for periodic records of a single period).
+        hold-out with ``period``: periodic records are fitted in whole
+        periods).
     n_iter_no_change : int, default=None
         Stop once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
@@ -160,6 +164,16 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         Mean squared simulation error on the held-out rows per iteration.
     best_iteration_ : int
         Iteration whose parameters were kept.
+    start_losses_ : ndarray of shape (n_init,)
+        Mean squared simulation error of every start on the end of the
+        sequences that all starts held out (``inf`` for a start that failed or
+        that ran away on the enlarged estimation input).
+    fell_back_to_linear_ : bool
+        True when no start beat the linear model there: the linear model is
+        kept (its nonlinear terms are zero) and a
+        :class:`~sknlss.LinearFallbackWarning` is issued.
+    fit_transient_ : int
+        Samples per sequence left out of the cost (see ``n_transient``).
     bla_ : BLAEstimator
         The fitted linear model used for the initialisation (fitted on the rows
         before the held-out tails, in this model's state coordinates); it
@@ -216,7 +230,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         period=None,
         cost="time",
         stability_penalty=1.0,
-        weight_decay=0.01,
+        weight_decay=10.0,
         bla=None,
         max_iter=100,
         tol=1e-9,
@@ -262,12 +276,9 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
 
     def _prepare_starts(self, context):
         problem, theta = context["problem"], context["theta"]
-        if self.weight_decay:
-            problem.set_decay_scale(theta)
         if self.n_init > 1:
-            terms = problem.model.terms
             points = np.hstack([problem.simulate(theta)[1], problem.U])[problem.fit_rows]
-            context["monomial_rms"] = terms.decay_scale(None, points)
+            context["monomial_rms"] = problem.model.parameter_rms(theta, points)
 
     def _starting_points(self, context, start, seed):
         theta = context["theta"].copy()

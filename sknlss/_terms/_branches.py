@@ -131,12 +131,10 @@ class BranchTerms(Terms):
         self.work_size = 3 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
 
-    def decay_scale(self, theta_terms, S):
-        """The branch coefficients, each scaled by the RMS of its basis function
-        along the trajectory, and the output directions W."""
-        (_, (n_vars, rank)), (_, (_, n_fun)), (_, (n_rows, _)) = self.blocks
-        V = theta_terms[: n_vars * rank].reshape(n_vars, rank)
-        Z = np.asarray(S) @ V
-        rms = np.stack([np.sqrt(np.mean(self.basis.evaluate(Z[:, l])[0] ** 2, axis=0))
-                        for l in range(rank)])
-        return np.concatenate([np.zeros(n_vars * rank), rms.ravel(), np.ones(n_rows * rank)])
+    def decay_mask(self):
+        """The branch coefficients and the output directions W are decayed; the
+        input directions V are not (their scale trades with the coefficients')."""
+        (_, (n_vars, rank)), _, _ = self.blocks
+        mask = np.ones(self.n_params, dtype=bool)
+        mask[: n_vars * rank] = False
+        return mask

@@ -155,10 +155,7 @@ class NetworkTerms(Terms):
         self.work_size = 2 * (n_states + n_outputs) * n_neurons
         self.n_state_params = n_states * n_neurons * (n_vars + 2) + n_states
 
-    def decay_scale(self, theta_terms, S):
+    def decay_mask(self):
         """The weights W and v are decayed, the biases are not."""
-        scale = []
-        for name, shape in self.blocks:
-            decayed = name.endswith(("_W", "_v"))
-            scale.append(np.full(int(np.prod(shape)), 1.0 if decayed else 0.0))
-        return np.concatenate(scale)
+        return np.concatenate([np.full(int(np.prod(shape)), name.endswith(("_W", "_v")))
+                               for name, shape in self.blocks])

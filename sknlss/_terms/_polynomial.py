@@ -381,10 +381,3 @@ class PolynomialTerms(Terms):
         ).astype(np.int64)
         self.work_size = n_vars * (max_degree + 1) + (n_zeta + n_eta) * (1 + n_states)
         self.n_state_params = n_states * n_zeta
-
-    def decay_scale(self, theta_terms, S):
-        """RMS of each coefficient's monomial along the trajectory: the decay
-        then acts on the size of each term's contribution."""
-        (_, (n_states, _)), (_, (n_outputs, _)) = self.blocks
-        rms = [np.sqrt(np.mean(evaluate_monomials(S, e) ** 2, axis=0)) for e in self.exponents]
-        return np.concatenate([np.tile(rms[0], n_states), np.tile(rms[1], n_outputs)])

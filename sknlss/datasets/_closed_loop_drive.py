@@ -27,7 +27,10 @@ _GAINS = np.array([
     1.0 / (2.0 * np.pi * 100.0),            # derivative filter time constant (s)
 ])
 
-_MOTION_BAND = (0.0, 2.0)   # Hz, band of the reference's random motion
+# Hz, band of the reference's random motion: up to half the loop's 10 Hz
+# bandwidth, as drives are excited to identify their dynamics (a slower
+# reference is tracked almost exactly and shows little of them).
+_MOTION_BAND = (0.0, 5.0)
 _DRIFT_PERIOD = 20.0        # s, period of the reference's slow drift
 _PRE_ROLL = 1000            # samples simulated before each record and dropped
 
@@ -68,8 +71,8 @@ y = the measured position p + e (m); u_plant_est and u_plant_test hold the
 controller's force F (N). The measurement noise e (white Gaussian, standard
 deviation noise_std, encoder-like) is fed back through the controller, as in a
 real drive.
-Reference: band-limited Gaussian random motion from 0 to 2 Hz of RMS
-reference_rms (10 mm by default) plus a slow drift (a sine of period 20 s,
+Reference: band-limited Gaussian random motion from 0 to 5 Hz of RMS
+reference_rms (2 mm by default) plus a slow drift (a sine of period 20 s,
 amplitude 2 reference_rms, random phase). Each record starts mid-motion: the
 loop is simulated for 1000 samples before it and they are dropped.
 Test reference: over the last quarter of the record the random motion's
@@ -147,8 +150,8 @@ def _record(reference, noise_std, sampling_time, n_substeps, rng):
      "sampling_time": [Interval(Real, 0, _MAX_SAMPLING_TIME, closed="right")]},
     prefer_skip_nested_validation=True,
 )
-def make_closed_loop_drive(n_samples=6000, n_test_samples=3000, *, reference_rms=0.01,
-                           noise_std=1e-6, sampling_time=1e-3, n_substeps=20,
+def make_closed_loop_drive(n_samples=6000, n_test_samples=3000, *, reference_rms=0.002,
+                           noise_std=1e-6, sampling_time=1e-3, n_substeps=40,
                            random_state=None):
     """Simulate a positioning drive with friction under PID control, in closed loop.
 
@@ -156,7 +159,8 @@ def make_closed_loop_drive(n_samples=6000, n_test_samples=3000, *, reference_rms
     plant) is positioned by a sampled PID controller; as positioning drives are
     logged, the input ``X`` is the position reference and the output ``y`` the
     measured position. The reference is band-limited random motion (0 to
-    2 Hz) on a slow drift; each record starts mid-motion. Over the last
+    5 Hz, half the loop's bandwidth) on a slow drift; each record starts
+    mid-motion. Over the last
     quarter of the test record the motion ramps up to 1.5 times the
     estimation amplitude and a final move carries the reference beyond the
     estimation positions. The friction makes the closed loop nonlinear
@@ -169,7 +173,7 @@ def make_closed_loop_drive(n_samples=6000, n_test_samples=3000, *, reference_rms
         Samples of the estimation record, at least 128.
     n_test_samples : int, default=3000
         Samples of the test record, at least 128.
-    reference_rms : float, default=0.01
+    reference_rms : float, default=0.002
         RMS value (m) of the reference's random motion in the estimation
         record; the drift's amplitude is twice it.
     noise_std : float, default=1e-6
@@ -178,7 +182,7 @@ def make_closed_loop_drive(n_samples=6000, n_test_samples=3000, *, reference_rms
     sampling_time : float, default=1e-3
         Sampling time of the controller and of the data, in seconds, at most
         5 ms (the controller is tuned for a 10 Hz closed loop).
-    n_substeps : int, default=20
+    n_substeps : int, default=40
         Runge-Kutta steps per sampling interval; the steps may not be longer
         than 5e-5 s, so ``n_substeps >= sampling_time / 5e-5``.
     random_state : int, RandomState instance or None, default=None
