@@ -92,10 +92,15 @@ def _run(benchmark, label, seed, data, factory, records, scale):
     warnings.simplefilter("ignore")
     model = factory(seed)
     start = time.perf_counter()
-    model.fit(data.X_est, data.y_est)
+    try:
+        model.fit(data.X_est, data.y_est)
+    except Exception as error:  # a failed fit is a result too: reported, not fatal
+        return {"benchmark": benchmark, "model": label, "seed": seed, "fit_time": 0.0,
+                "n_params": 0, "fallback": False, "error": repr(error),
+                **{name: float("nan") for name in records}}
     elapsed = time.perf_counter() - start
     row = {"benchmark": benchmark, "model": label, "seed": seed, "fit_time": elapsed,
-           "n_params": int(model.n_params_),
+           "n_params": int(model.n_params_), "error": "",
            "fallback": bool(getattr(model, "fell_back_to_linear_", False))}
     for name, (X, y, skip) in records.items():
         error = model.predict(X)[skip:] - y[skip:]
@@ -112,7 +117,8 @@ def _summary(runs, found):
             if not rows:
                 continue
             summary = {"benchmark": benchmark, "model": label, "unit": unit,
-                       "n_params": rows[0]["n_params"], "runs": len(rows),
+                       "n_params": max(r["n_params"] for r in rows), "runs": len(rows),
+                       "failed": sum(bool(r["error"]) for r in rows),
                        "fallbacks": sum(r["fallback"] for r in rows),
                        "fit_time": float(np.median([r["fit_time"] for r in rows]))}
             for name in records:
@@ -132,13 +138,14 @@ def _markdown(summary, found, setting):
         text += [f"### {benchmark} ({unit})", "",
                  "| model | params | " + " | ".join(f"{name} median [min, max]"
                                                    for name in records)
-                 + " | fit (s) | fallbacks |",
-                 "|---|---|" + "---|" * len(records) + "---|---|"]
+                 + " | fit (s) | fallbacks | failed |",
+                 "|---|---|" + "---|" * len(records) + "---|---|---|"]
         for s in rows:
             cells = [f"{s[f'{name} median']:.4g} [{s[f'{name} min']:.4g}, "
                      f"{s[f'{name} max']:.4g}]" for name in records]
             text.append(f"| {s['model']} | {s['n_params']} | " + " | ".join(cells)
-                        + f" | {s['fit_time']:.1f} | {s['fallbacks']}/{s['runs']} |")
+                        + f" | {s['fit_time']:.1f} | {s['fallbacks']}/{s['runs']} "
+                        f"| {s['failed']} |")
         text.append("")
     return "\n".join(text)
 
@@ -162,6 +169,8 @@ def main():
             if args.models is None or label in args.models
             for seed in args.random_states]
     runs = Parallel(n_jobs=args.n_jobs)(delayed(_run)(*job) for job in jobs)
+    if args.output:
+        Path(args.output).mkdir(parents=True, exist_ok=True)
     summary = _summary(runs, found)
     text = _markdown(summary, found, setting)
     print(text)

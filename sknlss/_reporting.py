@@ -50,11 +50,11 @@ def _write_figures(name, benchmark, data, fitted, output):
         paths.append(output / f"{name}_bla_frf.png")
         figure.savefig(paths[-1], dpi=120, bbox_inches="tight")
         plt.close(figure)
-    figure = plot_simulation(y, finite, sampling_time=Ts, unit=data.output_unit)
+    figure = plot_simulation(y, finite, sampling_time=Ts, unit=data.get("output_unit"))
     paths.append(output / f"{name}_simulation_{record}.png")
     figure.savefig(paths[-1], dpi=120, bbox_inches="tight")
     plt.close(figure)
-    figure = plot_error_spectrum(y, finite, sampling_time=Ts, unit=data.output_unit,
+    figure = plot_error_spectrum(y, finite, sampling_time=Ts, unit=data.get("output_unit"),
                                  noise_level=noise_level(y, Ts, data.excited_band[1]))
     paths.append(output / f"{name}_error_spectrum_{record}.png")
     figure.savefig(paths[-1], dpi=120, bbox_inches="tight")

@@ -21,14 +21,14 @@ def _duffing(u):
     y = np.empty(len(u))
     for t, ut in enumerate(u[:, 0]):
         y[t] = x[0]
-        x = np.array([1.5 * x[0] - 0.7 * x[1] - 0.1 * x[0] ** 3 + ut, x[0]])
+        x = np.array([1.5 * x[0] - 0.7 * x[1] - 0.05 * x[0] ** 3 + ut, x[0]])
     return y
 
 
 @pytest.fixture(scope="module")
 def records():
     rng = np.random.default_rng(0)
-    u, u_test = rng.standard_normal((600, 1)), rng.standard_normal((400, 1))
+    u, u_test = 0.5 * rng.standard_normal((600, 1)), 0.5 * rng.standard_normal((400, 1))
     return u, _duffing(u), u_test, _duffing(u_test)
 
 

@@ -148,8 +148,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         tail continues the simulation of the fitted part). 0 keeps the last
         iterate. ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275
         and 0.325 in turn and ranks them on the end they all held out (no
-        hold-out with ``period``: periodic records are fitted in whole
-        periods).
+        hold-out with ``period``, periodic records being fitted in whole
+        periods, nor for sequences shorter than 100 samples).
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
@@ -365,7 +365,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     def _make_terms(self, n_inputs, n_outputs):
         self.branch_degree_ = self._branch_degree()
         return BranchTerms(self.n_states, n_inputs, n_outputs, self.rank,
-                           PolynomialBasis(self.branch_degree_))
+                           PolynomialBasis(self.branch_degree_, constant=False))
 
     def _n_drop(self, model):
         # Similarity transforms of the states and the scaling of each branch's

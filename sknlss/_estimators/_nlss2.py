@@ -198,8 +198,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         the iteration and the start. ``0`` selects on the training cost.
         ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275 and
         0.325 in turn and ranks them on the end they all held out (no
-        hold-out with ``period``: periodic records are fitted in whole
-        periods).
+        hold-out with ``period``, periodic records being fitted in whole
+        periods, nor for sequences shorter than 100 samples).
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when

@@ -42,6 +42,8 @@ from ._bla import BLAEstimator, fit_linear_model, fitted_bla
 #: all of them held out. On a short record, the model a single held-out end
 #: selects changes a lot when that end moves by a few samples.
 _AUTO_SHARES = (0.25, 0.3, 0.35, 0.275, 0.325)
+#: Sequences shorter than this are not split by ``validation_fraction="auto"``.
+_MIN_SPLIT_LENGTH = 100
 #: Without an estimated initial state, the cost skips the samples in which the
 #: slowest pole of the linear model decays to this fraction, at most this
 #: share of the shortest sequence.
@@ -171,10 +173,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         """The held-out share of every start."""
         if self.validation_fraction != "auto":
             return [float(self.validation_fraction)] * self.n_init
-        if self.period is not None:
-            # Periodic records are fitted in whole periods: the starts are
-            # ranked on the cost (hold out whole periods or realizations by
-            # hand, e.g. as a separate record).
+        if self.period is not None or np.min(np.diff(starts)) < _MIN_SPLIT_LENGTH:
+            # Periodic records are fitted in whole periods, and a very short
+            # record has no samples to spare: the starts are ranked on the
+            # cost (hold out whole periods or realizations by hand, e.g. as a
+            # separate record).
             return [0.0] * self.n_init
         return [_AUTO_SHARES[i % len(_AUTO_SHARES)] for i in range(self.n_init)]
 

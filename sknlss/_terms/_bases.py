@@ -30,8 +30,9 @@ def basis_functions(code, degrees, z, out, o_values, o_slopes):
     if code == _POWERS:
         for k in range(degrees.shape[0]):
             d = degrees[k]
-            out[o_values + k] = z**d
-            out[o_slopes + k] = d * z ** (d - 1)
+            # Compiled code must not raise (z ** -1 at z = 0): degree 0 apart.
+            out[o_values + k] = z**d if d > 0 else 1.0
+            out[o_slopes + k] = d * z ** (d - 1) if d > 0 else 0.0
         return
     t = np.tanh(z)
     chain = 1.0 - t * t
@@ -69,13 +70,21 @@ class _Basis:
 
     code = _POWERS
 
-    def __init__(self, degree=3):
+    def __init__(self, degree=3, *, constant=True):
         self.degree = degree
+        self.constant = constant
 
     @property
     def degrees(self):
-        """Degrees of the basis functions, as int64."""
-        return np.arange(1, self._checked_degree(1) + 1, dtype=np.int64)
+        """Degrees of the basis functions, as int64 (0 for the constant)."""
+        return self._with_constant(np.arange(1, self._checked_degree(1) + 1))
+
+    def _with_constant(self, degrees):
+        if not isinstance(self.constant, (bool, np.bool_)):
+            raise ValueError(
+                f"{type(self).__name__}: constant must be a bool, got {self.constant!r}."
+            )
+        return np.concatenate([[0] if self.constant else [], degrees]).astype(np.int64)
 
     def _checked_degree(self, lowest):
         degree = self.degree
@@ -119,7 +128,7 @@ class _Basis:
         -------
         params : dict
         """
-        return {"degree": self.degree}
+        return {"degree": self.degree, "constant": self.constant}
 
     def __repr__(self):
         params = ", ".join(f"{key}={value!r}" for key, value in self.get_params().items())
@@ -133,7 +142,8 @@ class _Basis:
 
 
 class PolynomialBasis(_Basis):
-    """Powers of the branch input, from degree 2 (the linear part is the model's own).
+    """Powers of the branch input from degree 2 (the linear part is the model's own),
+    and a constant.
 
     Parameters
     ----------
@@ -141,19 +151,26 @@ class PolynomialBasis(_Basis):
         Highest power, at least 2.
     kind : {"full", "odd", "even"}, default="full"
         All powers from 2 to ``degree``, the odd ones from 3, or the even ones.
+    constant : bool, default=True
+        Include a constant. The model works on centred signals and has no
+        bias term of its own: a static nonlinearity expanded around the mean
+        operating point instead of its own zero needs the constant that the
+        shift creates (the linear terms it creates are the model's linear
+        part).
 
     Examples
     --------
     >>> from sknlss import PolynomialBasis
     >>> PolynomialBasis(5, kind="odd").degrees
-    array([3, 5])
+    array([0, 3, 5])
     """
 
     code = _POWERS
 
-    def __init__(self, degree=3, *, kind="full"):
+    def __init__(self, degree=3, *, kind="full", constant=True):
         self.degree = degree
         self.kind = kind
+        self.constant = constant
 
     @property
     def degrees(self):
@@ -168,7 +185,7 @@ class PolynomialBasis(_Basis):
             raise ValueError(
                 f"PolynomialBasis: kind='odd' needs degree >= 3, got {self.degree!r}."
             )
-        return degrees
+        return self._with_constant(degrees)
 
     def get_params(self, deep=True):
         """Constructor parameters, for display and comparison.
@@ -182,11 +199,11 @@ class PolynomialBasis(_Basis):
         -------
         params : dict
         """
-        return {"degree": self.degree, "kind": self.kind}
+        return {"degree": self.degree, "kind": self.kind, "constant": self.constant}
 
 
 class LegendreBasis(_Basis):
-    """Legendre polynomials ``P_1 .. P_degree`` of ``tanh(z)``.
+    """Legendre polynomials ``P_1 .. P_degree`` of ``tanh(z)``, and a constant.
 
     The squashing keeps every branch bounded, so the model cannot be driven
     to infinity by its nonlinearity when the input leaves the estimation
@@ -196,13 +213,15 @@ class LegendreBasis(_Basis):
     ----------
     degree : int, default=3
         Highest degree, at least 1.
+    constant : bool, default=True
+        Include the constant ``P_0`` (see :class:`PolynomialBasis`).
     """
 
     code = _LEGENDRE
 
 
 class ChebyshevBasis(_Basis):
-    """Chebyshev polynomials ``T_1 .. T_degree`` of ``tanh(z)``.
+    """Chebyshev polynomials ``T_1 .. T_degree`` of ``tanh(z)``, and a constant.
 
     Bounded like :class:`LegendreBasis`; the Chebyshev polynomials weight the
     ends of the range more.
@@ -211,6 +230,8 @@ class ChebyshevBasis(_Basis):
     ----------
     degree : int, default=3
         Highest degree, at least 1.
+    constant : bool, default=True
+        Include the constant ``T_0`` (see :class:`PolynomialBasis`).
     """
 
     code = _CHEBYSHEV
