@@ -75,7 +75,11 @@ class _Basis:
     @property
     def degrees(self):
         """Degrees of the basis functions, as int64."""
-        return np.arange(1, self._checked_degree(1) + 1, dtype=np.int64)
+        return np.array(self._degree_range(), dtype=np.int64)
+
+    def _degree_range(self):
+        """The degrees as a ``range``: counted without being listed."""
+        return range(1, self._checked_degree(1) + 1)
 
     def _checked_degree(self, lowest):
         degree = self.degree
@@ -90,7 +94,7 @@ class _Basis:
     @property
     def n_functions(self):
         """Number of basis functions."""
-        return len(self.degrees)
+        return len(self._degree_range())
 
     def evaluate(self, z):
         """Values and derivatives of the basis functions.
@@ -155,16 +159,15 @@ class PolynomialBasis(_Basis):
         self.degree = degree
         self.kind = kind
 
-    @property
-    def degrees(self):
+    def _degree_range(self):
         top = self._checked_degree(2)
         if self.kind not in ("full", "odd", "even"):
             raise ValueError(
                 f"PolynomialBasis: kind must be 'full', 'odd' or 'even', got {self.kind!r}."
             )
         first, step = {"full": (2, 1), "odd": (3, 2), "even": (2, 2)}[self.kind]
-        degrees = np.arange(first, top + 1, step, dtype=np.int64)
-        if degrees.size == 0:
+        degrees = range(first, top + 1, step)
+        if not degrees:
             raise ValueError(
                 f"PolynomialBasis: kind='odd' needs degree >= 3, got {self.degree!r}."
             )
