@@ -1,7 +1,7 @@
 """The Cascaded Tanks benchmark: loader of the measured data and a simulator."""
 
 import os
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
 from numba import njit
@@ -9,6 +9,7 @@ from scipy.io import loadmat
 from sklearn.utils import Bunch, check_random_state
 from sklearn.utils._param_validation import Interval, validate_params
 
+from .._validation import Integers
 from ..signals import multisine
 from ._fetch import RemoteDataset, fetch_file
 
@@ -286,7 +287,7 @@ def _benchmark_like_input(n_samples, sampling_time, rng):
 
 @validate_params(
     {
-        "n_samples": [Interval(Integral, 3, None, closed="left")],
+        "n_samples": [Integers(3, None, closed="left")],
         "input": ["array-like", None],
         "sampling_time": [Interval(Real, 0, np.inf, closed="neither")],
         "process_noise": [Interval(Real, 0, np.inf, closed="left")],
@@ -295,7 +296,7 @@ def _benchmark_like_input(n_samples, sampling_time, rng):
         "overflow_fraction": [Interval(Real, 0, 1, closed="both")],
         "k": ["array-like"],
         "x0": ["array-like", None],
-        "n_substeps": [Interval(Integral, 1, None, closed="left")],
+        "n_substeps": [Integers(1, None, closed="left")],
         "random_state": ["random_state"],
     },
     prefer_skip_nested_validation=True,
