@@ -68,7 +68,7 @@ def fit_from(problem, candidates, *, label, **options):
             break
     else:
         raise ValueError(
-            f"{label}: no starting point can be simulated on the estimation data."
+            f"{label}: no starting point can be simulated on the estimation data (X, y)."
         )
     result = levenberg_marquardt(problem.residual, theta0,
                                  validation_loss=problem.validation_loss, label=label,

@@ -178,7 +178,7 @@ def levenberg_marquardt(
     if r is None or not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
         raise ValueError(
             "The initial model diverges or gives non-finite values on the "
-            "estimation data; it cannot start the optimisation."
+            "estimation data (X, y); it cannot start the optimisation."
         )
     m = r.size
     cost = float(r @ r)

@@ -198,7 +198,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         n_states = self.A_.shape[0]
         if x0 is None:
             x0 = self.x0_
-        x0 = np.asarray(x0, dtype=np.float64)
+        with naming("x0"):
+            x0 = np.asarray(x0, dtype=np.float64)
         if x0.ndim == 1:
             x0 = np.broadcast_to(x0, (n_sequences, x0.shape[0]))
         if x0.shape != (n_sequences, n_states) or not np.all(np.isfinite(x0)):

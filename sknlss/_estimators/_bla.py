@@ -124,7 +124,15 @@ def fit_linear_model(U, Y, starts, params):
     # The factorisations here are small: multithreaded BLAS only adds
     # synchronisation cost (tenfold on two cores, see DESIGN.md §2).
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit_linear_model(U, Y, starts, params)
+        try:
+            return _fit_linear_model(U, Y, starts, params)
+        except np.linalg.LinAlgError as error:
+            # Records far from any linear system (a spike that dwarfs the rest of
+            # the record) can leave the FRF without a usable factorisation.
+            raise ValueError(
+                f"The Best Linear Approximation cannot be computed from these data "
+                f"(X, y): {error}."
+            ) from error
 
 
 def _fit_linear_model(U, Y, starts, params):
@@ -172,7 +180,7 @@ def _set_fitted(bla, fit, normalisation):
     # In the user's units, an FRF or a variance beyond the floating-point range
     # (outputs of 1e200 for inputs of 1e-200) is infinite; the model itself
     # works in normalised units.
-    with np.errstate(over="ignore"):
+    with np.errstate(over="ignore", invalid="ignore"):
         scale = normalisation["y_scale_"][:, None] / normalisation["u_scale_"][None, :]
         bla.frf_ = fit.frf * scale
         bla.frf_model_ = fit.frf_model * scale

@@ -315,7 +315,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         )
         failures = [outcome for outcome in outcomes if isinstance(outcome, Exception)]
         if len(failures) == len(outcomes):
-            raise failures[0]
+            # The data or the structure (or both) are at fault: name them.
+            raise ValueError(
+                f"{type(self).__name__}({self._structure()}): no start could be fitted "
+                f"to the data (X, y); the first failure: {failures[0]}") from failures[0]
         # Every start is judged on the end that all of them held out.
         common = problems[min(shares)]
         losses = [np.inf if isinstance(outcome, Exception) else holdout_loss(common, outcome[0])
