@@ -19,6 +19,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._core._multistart import run_starts
 from ._core._sequences import holdout_masks, sequence_bounds
+from ._estimators._base import _unfitted_on_error
 from ._validation import ANY_INTEGER, binary_magnitude, naming
 from .exceptions import SimulationDivergedWarning
 
@@ -39,9 +40,10 @@ def _holdout_errors(model, X, Y, sequence_id, rows):
         simulated = np.asarray(model.predict(X, sequence_id=sequence_id)).reshape(Y.shape)
     if not np.all(np.isfinite(simulated[rows])):
         return -np.inf, np.inf
-    # In units of a power of two near each output's largest value (an exact
-    # scaling) the squares cannot overflow; the RMS error is scaled back.
-    unit = binary_magnitude(Y[rows])
+    # In units of a power of two near each output's largest value, measured or
+    # simulated (an exact scaling), the squares cannot overflow; the RMS error
+    # is scaled back.
+    unit = np.maximum(binary_magnitude(Y[rows]), binary_magnitude(simulated[rows]))
     measured = Y[rows] / unit
     mse = np.mean((simulated[rows] / unit - measured) ** 2, axis=0)
     variance = np.var(measured, axis=0)
@@ -168,6 +170,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
             )
         return candidates, float(fractions.min())
 
+    @_unfitted_on_error
     def fit(self, X, y, *, sequence_id=None):
         """Fit every candidate and keep the best on the common held-out end.
 
@@ -223,8 +226,6 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
                 "The simulation of every fitted candidate diverges on the held-out end: "
                 f"the first one ({candidates[best]}) is kept, but no candidate simulates "
                 "these data.", SimulationDivergedWarning, stacklevel=2)
-        # Fitted attributes are set once every candidate has been judged, so an
-        # interrupted search leaves the estimator unfitted.
         self.holdout_fraction_ = holdout_fraction
         self.results_ = {
             "params": candidates,
