@@ -32,7 +32,6 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from .._core._memory import check_memory
 from .._core._model import StateSpaceModel
 from .._core._multistart import fit_from, run_starts
-from .._core._optimize import LMResult
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import part_before_holdout, steady_state_rows
 from .._validation import ANY_INTEGER, Integers
@@ -156,6 +155,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self.bla_ = fitted_bla(params, linear, normalisation_of(self))
         return linear.A, linear.B, linear.C, linear.D, linear.x0
 
+    def _fit_linear_part(self, problem, theta):
+        """``theta`` with its linear part (and x0) refined on the simulation
+        error, the terms left as they are, and the search's result."""
+        model = problem.model
+        free = model.linear_columns
+        options = dict(self._lm_options(model), n_drop=model.n_states**2)
+        theta = theta.copy()
+        theta[free], result = fit_from(problem.restricted(theta, free), [theta[free]],
+                                       label=f"{self._label} (linear part)", **options)
+        return theta, result
+
     def _refined_linear_start(self, problem, theta):
         """The starting parameters with the linear part (and x0) refined on the
         simulation error, the terms switched off (with ``refine_linear``)."""
@@ -163,13 +173,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             return theta
         # A poor nonparametric BLA (short or noisy records) would otherwise
         # start the nonlinear search far away.
-        model = problem.model
-        free = model.linear_columns
-        options = dict(self._lm_options(model), n_drop=model.n_states**2)
-        theta = theta.copy()
-        theta[free] = fit_from(problem.restricted(theta, free), [theta[free]],
-                               label=f"{self._label} (linear part)", **options)[0]
-        return theta
+        return self._fit_linear_part(problem, theta)[0]
 
     def _record_start(self, context, start, seed):
         """Record what the kept start's initialisation found (nothing by default)."""
@@ -229,26 +233,23 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             f"the rows x parameters Jacobian, {concurrent} start(s) at a time)",
             "Use a smaller model or a shorter record.")
 
-    def _underdetermined(self, problem, theta):
-        """The linear start kept as the model, with a warning, when the cost has
-        fewer values than the model has parameters (``None`` otherwise): the
-        search could then fit the data exactly whatever the system, and its
-        hold-out selection would rest on noise."""
+    def _underdetermined(self, problem):
+        """Whether the cost holds fewer values than the model has parameters
+        (with a warning): the search could then fit the data exactly whatever
+        the system, and its hold-out selection would rest on noise."""
         model = problem.model
         n_values = int(problem.fit_rows.sum()) * model.n_outputs
         if n_values >= model.n_params:
-            return None
+            return False
         warnings.warn(
             f"{type(self).__name__}({self._structure()}) has {model.n_params} parameters "
             f"but its cost holds only {n_values} values (n_transient={self.n_transient}, "
             f"validation_fraction={self.validation_fraction!r}): the nonlinear terms "
             "cannot be identified and the linear model is kept (its nonlinear terms "
-            "are zero). Use a longer record or a smaller model.",
+            "are zero, its linear part refined on the simulation error). Use a longer "
+            "record or a smaller model.",
             LinearFallbackWarning, stacklevel=5)
-        residual = problem.residual(theta, False)[0]
-        loss = np.inf if residual is None else float(np.mean(residual**2))
-        return LMResult(theta=theta, loss_history=np.array([loss]), validation_history=None,
-                        best_iter=0, n_iter=0, converged=True)
+        return True
 
     def _fit_normalized(self, U, Y, starts):
         self._check_periodic(starts)
@@ -274,13 +275,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values = {name: np.zeros(shape) for name, shape in model.blocks}
         values.update(A=A, B=B, C=C, D=D, x0=x0)
         theta = model.pack(values)
-        fallback = self._underdetermined(problem, theta)
-        if fallback is None:
-            theta_best, result = self._search(problems, shares, theta, U, Y, starts)
+        if self._underdetermined(problem):
+            theta_best, result = self._fit_linear_part(problem, theta)
+            self.start_losses_, self.fell_back_to_linear_ = np.zeros(0), True
         else:
-            self.start_losses_ = np.zeros(0)
-            self.fell_back_to_linear_ = True
-            theta_best, result = theta, fallback
+            theta_best, result = self._search(problems, shares, theta, U, Y, starts)
         values = model.unpack(theta_best)
         self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
         self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
