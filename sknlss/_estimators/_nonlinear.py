@@ -31,7 +31,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from .._core._memory import check_memory
 from .._core._model import StateSpaceModel
-from .._core._multistart import fit_from, run_starts
+from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import part_before_holdout, steady_state_rows
 from .._validation import ANY_INTEGER, Integers
@@ -162,8 +162,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         free = model.linear_columns
         options = dict(self._lm_options(model), n_drop=model.n_states**2)
         theta = theta.copy()
-        theta[free], result = fit_from(problem.restricted(theta, free), [theta[free]],
-                                       label=f"{self._label} (linear part)", **options)
+        try:
+            theta[free], result = fit_from(problem.restricted(theta, free), [theta[free]],
+                                           label=f"{self._label} (linear part)", **options)
+        except START_ERRORS as failure:
+            raise self._unfittable(failure) from failure
         return theta, result
 
     def _refined_linear_start(self, problem, theta):
@@ -206,6 +209,12 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     def _structure(self):
         """The structure parameters and their values, for messages."""
         return ", ".join(f"{name}={getattr(self, name)!r}" for name in self._structure_params)
+
+    def _unfittable(self, failure):
+        """The error of a fit that failed numerically: the data or the structure
+        (or both) are at fault, so it names them."""
+        return ValueError(f"{type(self).__name__}({self._structure()}): the model cannot "
+                          f"be fitted to the data (X, y): {failure}")
 
     def _check_model_size(self, U, Y, starts, shares):
         """Refuse, before anything is built, a model whose fit would not fit in memory.
@@ -314,10 +323,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         )
         failures = [outcome for outcome in outcomes if isinstance(outcome, Exception)]
         if len(failures) == len(outcomes):
-            # The data or the structure (or both) are at fault: name them.
-            raise ValueError(
-                f"{type(self).__name__}({self._structure()}): no start could be fitted "
-                f"to the data (X, y); the first failure: {failures[0]}") from failures[0]
+            raise self._unfittable(failures[0]) from failures[0]
         # Every start is judged on the end that all of them held out.
         common = problems[min(shares)]
         losses = [np.inf if isinstance(outcome, Exception) else holdout_loss(common, outcome[0])
