@@ -13,6 +13,7 @@ import numpy as np
 from sklearn.utils._param_validation import validate_params
 
 from ._validation import POSITIVE_FINITE, Integers
+from .metrics import rms_error
 
 __all__ = ["plot_frf", "plot_simulation", "plot_error_spectrum"]
 
@@ -422,7 +423,7 @@ def plot_simulation(y_true, y_pred, *, sampling_time=None, output_index=0, unit=
                        label=f"{name} (simulated)")
         output_ax.set_ylim(output_limits)
         output_ax.set_ylabel(f"Output{in_unit}")
-        rms = np.sqrt(np.mean(errors[name] ** 2))
+        rms = rms_error(measured, predictions[name])
         error_ax.axhline(0.0, color="0.6", linewidth=0.8)
         error_ax.plot(time, errors[name], color=colour, linewidth=1.0,
                       label=f"RMS error {rms:.3g} {unit or ''}".rstrip())
