@@ -31,6 +31,10 @@ from ._base import _BaseStateSpace, normalisation_of
 # standard deviation of 1e-6) are treated as this floor, so that noise-free
 # lines do not receive unbounded weights.
 _RELATIVE_VARIANCE_FLOOR = 1e-12
+# The signals are normalised to unit variance: a variance below the squared
+# machine precision is rounding, not noise. Without this floor, a record with
+# (nearly) no linear response gives weights beyond 1e150 whose squares overflow.
+_ABSOLUTE_VARIANCE_FLOOR = np.finfo(float).eps ** 2
 
 
 def _weights(estimate, weighting):
@@ -45,8 +49,8 @@ def _weights(estimate, weighting):
         var = None
     if var is None:
         return np.ones(estimate.frf.shape)
-    floor = _RELATIVE_VARIANCE_FLOOR * max(np.mean(np.abs(estimate.frf) ** 2),
-                                           np.finfo(float).tiny)
+    floor = max(_RELATIVE_VARIANCE_FLOOR * np.mean(np.abs(estimate.frf) ** 2),
+                _ABSOLUTE_VARIANCE_FLOOR)
     return 1.0 / np.sqrt(np.maximum(var, floor))
 
 
