@@ -207,7 +207,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
             warnings.warn(
                 f"{len(models) - len(fitted)} of {len(models)} candidates failed to fit "
                 f"and are ranked last (see results_['error']); the first error: {failed}",
-                FitFailedWarning, stacklevel=2)
+                FitFailedWarning, stacklevel=3)
         # The candidates validated the data; the ranking only needs them as arrays.
         X_checked = np.asarray(X, dtype=np.float64)
         Y = np.asarray(y, dtype=np.float64).reshape(len(X_checked), -1)
@@ -225,7 +225,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
             warnings.warn(
                 "The simulation of every fitted candidate diverges on the held-out end: "
                 f"the first one ({candidates[best]}) is kept, but no candidate simulates "
-                "these data.", SimulationDivergedWarning, stacklevel=2)
+                "these data.", SimulationDivergedWarning, stacklevel=3)
         self.holdout_fraction_ = holdout_fraction
         self.results_ = {
             "params": candidates,
