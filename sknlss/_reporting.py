@@ -13,8 +13,11 @@ _QUIET_BAND_FACTOR = 1.5
 def noise_level(y, sampling_time, band_edge):
     """Standard deviation of the output noise, from the bins above the excited band.
 
-    Returns None when no bin lies above ``1.5 * band_edge``.
+    Returns None when the band is not known or no bin lies above
+    ``1.5 * band_edge``.
     """
+    if band_edge is None:
+        return None
     spectrum = np.fft.rfft(y - y.mean())
     frequencies = np.fft.rfftfreq(y.size, d=sampling_time)
     quiet = frequencies > _QUIET_BAND_FACTOR * band_edge
@@ -55,7 +58,7 @@ def _write_figures(name, benchmark, data, fitted, output):
     figure.savefig(paths[-1], dpi=120, bbox_inches="tight")
     plt.close(figure)
     figure = plot_error_spectrum(y, finite, sampling_time=Ts, unit=data.get("output_unit"),
-                                 noise_level=noise_level(y, Ts, data.excited_band[1]))
+                                 noise_level=noise_level(y, Ts, data.get("excited_band", (None, None))[1]))
     paths.append(output / f"{name}_error_spectrum_{record}.png")
     figure.savefig(paths[-1], dpi=120, bbox_inches="tight")
     plt.close(figure)

@@ -18,6 +18,7 @@ the same kind is used instead, and said so.
 """
 
 import math
+import os
 import sys
 import time
 import warnings
@@ -25,7 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from sklearn.utils._param_validation import HasMethods, validate_params
 
+from ._validation import POSITIVE_FINITE
 from .datasets import fetch_cascaded_tanks, fetch_silverbox, make_cascaded_tanks, make_duffing
 from .exceptions import SimulationDivergedWarning
 from .metrics import rms_error
@@ -124,6 +127,21 @@ BENCHMARKS = {
 }
 
 
+def _benchmark(name, argument):
+    """The benchmark called ``name``; a ValueError naming ``argument`` for another name."""
+    if not (isinstance(name, str) and name in BENCHMARKS):
+        raise ValueError(f"{argument} must name one of {sorted(BENCHMARKS)}, got {name!r}.")
+    return BENCHMARKS[name]
+
+
+_OUT = [HasMethods(["write"]), None]
+
+
+@validate_params(
+    {"name": [str], "data_home": [str, os.PathLike, None], "download_if_missing": ["boolean"],
+     "out": _OUT},
+    prefer_skip_nested_validation=True,
+)
 def load_benchmark(name, data_home=None, *, download_if_missing=True, out=None):
     """The measured records of a benchmark, or a simulated stand-in when they cannot be had.
 
@@ -145,7 +163,7 @@ def load_benchmark(name, data_home=None, *, download_if_missing=True, out=None):
     source : str
         ``"measured (<file name>)"`` or ``"simulated"``.
     """
-    benchmark = BENCHMARKS[name]
+    benchmark = _benchmark(name, "name")
     out = sys.stdout if out is None else out
     try:
         data = benchmark.fetch(data_home, download_if_missing=download_if_missing)
@@ -172,6 +190,11 @@ def _fit_and_score(factory, seed, data, records, scale):
     return model, errors, fit_time
 
 
+@validate_params(
+    {"data": [HasMethods(["keys"])], "models": [list], "records": [dict],
+     "random_states": ["array-like"], "scale": [POSITIVE_FINITE], "out": _OUT},
+    prefer_skip_nested_validation=True,
+)
 def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, out=None):
     """Fit every model at every random state and summarise its test errors.
 
@@ -220,6 +243,8 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, out=N
     return rows, fitted
 
 
+@validate_params({"rows": [list], "records": [dict], "unit": [str]},
+                 prefer_skip_nested_validation=True)
 def format_table(rows, records, unit):
     """The rows of :func:`evaluate` as a text table: median [min, max] per record."""
     header = ["model", "params"] + [f"{name} ({unit})" for name in records] + ["fit (s)"]
@@ -238,6 +263,12 @@ def format_table(rows, records, unit):
     return "\n".join(text)
 
 
+@validate_params(
+    {"benchmarks": ["array-like"], "data_home": [str, os.PathLike, None],
+     "output": [str, os.PathLike, None], "download_if_missing": ["boolean"],
+     "random_states": ["array-like"], "out": _OUT},
+    prefer_skip_nested_validation=True,
+)
 def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, output=None,
               download_if_missing=True, random_states=(0, 1, 2), out=None):
     """Fit the models on the benchmarks and print the result tables.
@@ -266,6 +297,8 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
     from ._reporting import write_results
 
     out = sys.stdout if out is None else out
+    for name in benchmarks:
+        _benchmark(name, "benchmarks")
     tables = {}
     for name in benchmarks:
         benchmark = BENCHMARKS[name]

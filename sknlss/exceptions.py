@@ -20,6 +20,8 @@ class LinearFallbackWarning(UserWarning):
     """Warning raised when a nonlinear model does not beat its linear start.
 
     No start of the nonlinear optimisation simulated the held-out data better
-    than the linear model it started from; the estimator keeps that linear
-    model (its nonlinear terms are zero) and sets ``fell_back_to_linear_``.
+    than the linear model it started from, or the cost holds fewer values than
+    the model has parameters (no start is then tried); the estimator keeps
+    that linear model (its nonlinear terms are zero) and sets
+    ``fell_back_to_linear_``.
     """

@@ -8,45 +8,71 @@ sequence) and ``sequence_id``.
 """
 
 import numpy as np
+from sklearn.utils._param_validation import StrOptions, validate_params
 from sklearn.utils.metadata_routing import MetadataRequest, _MetadataRequester
 from sklearn.utils.metadata_routing import _routing_enabled
+from sklearn.utils.validation import check_array
 
 from ._core._sequences import sequence_bounds, transient_mask
+from ._validation import Integers, binary_magnitude, naming
 
 __all__ = ["rms_error", "nrmse", "fit_percent", "make_transient_scorer"]
 
+_METRIC_CONSTRAINTS = {
+    "y_true": ["array-like"],
+    "y_pred": ["array-like"],
+    "n_transient": [Integers(0, None, closed="left")],
+    "sequence_id": ["array-like", None],
+    "multioutput": [StrOptions({"uniform_average", "raw_values"})],
+}
+
 
 def _kept_pairs(y_true, y_pred, n_transient, sequence_id):
-    y_true = np.asarray(y_true, dtype=np.float64)
-    y_pred = np.asarray(y_pred, dtype=np.float64)
+    """The kept samples as 2-D arrays, and which outputs' simulations diverged.
+
+    A non-finite simulated output (a diverged simulation) is replaced by the
+    measured one, so that the metrics stay finite; the caller gives those
+    outputs an infinite error.
+    """
+    with naming("y_true"):
+        y_true = check_array(y_true, ensure_2d=False, dtype=np.float64, input_name="y_true")
+    with naming("y_pred"):
+        y_pred = check_array(y_pred, ensure_2d=False, dtype=np.float64,
+                             ensure_all_finite=False, input_name="y_pred")
     if y_true.shape != y_pred.shape:
         raise ValueError(
             f"y_true and y_pred have different shapes: {y_true.shape} and {y_pred.shape}."
         )
-    if y_true.ndim not in (1, 2) or y_true.shape[0] == 0:
-        raise ValueError(
-            f"y_true must be a non-empty 1-D or 2-D array, got shape {y_true.shape}."
-        )
-    if n_transient < 0:
-        raise ValueError(f"n_transient must be non-negative, got {n_transient}.")
     keep = transient_mask(sequence_bounds(sequence_id, y_true.shape[0]), n_transient)
     if not keep.any():
         raise ValueError(f"n_transient={n_transient} leaves no sample to evaluate.")
     y_true = y_true[keep].reshape(int(keep.sum()), -1)
     y_pred = y_pred[keep].reshape(y_true.shape)
-    return y_true, y_pred
+    finite = np.isfinite(y_pred)
+    return y_true, np.where(finite, y_pred, y_true), ~finite.all(axis=0)
+
+
+def _rms(values):
+    """RMS of every column, on values divided by their binary magnitude (an
+    exact scaling) so that the squares cannot overflow."""
+    unit = binary_magnitude(values)
+    return unit * np.sqrt(np.mean((values / unit) ** 2, axis=0))
+
+
+def _rms_errors(y_true, y_pred, diverged):
+    """RMS error of every output; infinite for the diverged ones (and for
+    errors beyond the floating-point range)."""
+    with np.errstate(over="ignore"):
+        rms = _rms(y_true - y_pred)
+    rms[diverged] = np.inf
+    return rms
 
 
 def _aggregate(values, multioutput):
-    if multioutput == "raw_values":
-        return values
-    if multioutput == "uniform_average":
-        return float(np.mean(values))
-    raise ValueError(
-        f"multioutput must be 'uniform_average' or 'raw_values', got {multioutput!r}."
-    )
+    return values if multioutput == "raw_values" else float(np.mean(values))
 
 
+@validate_params(_METRIC_CONSTRAINTS, prefer_skip_nested_validation=True)
 def rms_error(y_true, y_pred, *, n_transient=0, sequence_id=None,
               multioutput="uniform_average"):
     """Root-mean-square error of the simulated output.
@@ -67,7 +93,8 @@ def rms_error(y_true, y_pred, *, n_transient=0, sequence_id=None,
     Returns
     -------
     rms : float or ndarray of shape (n_outputs,)
-        RMS error in the units of ``y_true``.
+        RMS error in the units of ``y_true``; infinite for an output whose
+        simulation diverged (non-finite values in ``y_pred``).
 
     Examples
     --------
@@ -77,10 +104,11 @@ def rms_error(y_true, y_pred, *, n_transient=0, sequence_id=None,
     >>> rms_error([1.0, 2.0, 3.0, 4.0], [9.0, 2.0, 3.0, 4.0], n_transient=1)
     0.0
     """
-    y_true, y_pred = _kept_pairs(y_true, y_pred, n_transient, sequence_id)
-    return _aggregate(np.sqrt(np.mean((y_true - y_pred) ** 2, axis=0)), multioutput)
+    return _aggregate(_rms_errors(*_kept_pairs(y_true, y_pred, n_transient, sequence_id)),
+                      multioutput)
 
 
+@validate_params(_METRIC_CONSTRAINTS, prefer_skip_nested_validation=True)
 def nrmse(y_true, y_pred, *, n_transient=0, sequence_id=None,
           multioutput="uniform_average"):
     """RMS error divided by the standard deviation of the measured output.
@@ -101,7 +129,8 @@ def nrmse(y_true, y_pred, *, n_transient=0, sequence_id=None,
     Returns
     -------
     nrmse : float or ndarray of shape (n_outputs,)
-        Dimensionless; 1 is the error of predicting the mean.
+        Dimensionless; 1 is the error of predicting the mean; infinite for an
+        output whose simulation diverged.
 
     Examples
     --------
@@ -109,12 +138,13 @@ def nrmse(y_true, y_pred, *, n_transient=0, sequence_id=None,
     >>> round(nrmse([0.0, 2.0, 0.0, 2.0], [0.0, 2.0, 0.0, 0.0]), 6)
     1.0
     """
-    y_true, y_pred = _kept_pairs(y_true, y_pred, n_transient, sequence_id)
-    rms = np.sqrt(np.mean((y_true - y_pred) ** 2, axis=0))
-    std = y_true.std(axis=0)
+    y_true, y_pred, diverged = _kept_pairs(y_true, y_pred, n_transient, sequence_id)
+    rms = _rms_errors(y_true, y_pred, diverged)
+    std = _rms(y_true - y_true.mean(axis=0))
     return _aggregate(rms / np.where(std > 0, std, 1.0), multioutput)
 
 
+@validate_params(_METRIC_CONSTRAINTS, prefer_skip_nested_validation=True)
 def fit_percent(y_true, y_pred, *, n_transient=0, sequence_id=None,
                 multioutput="uniform_average"):
     """Fit percentage ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)``.
@@ -138,7 +168,7 @@ def fit_percent(y_true, y_pred, *, n_transient=0, sequence_id=None,
     Returns
     -------
     fit : float or ndarray of shape (n_outputs,)
-        Fit in percent.
+        Fit in percent; ``-inf`` for an output whose simulation diverged.
 
     Examples
     --------
@@ -214,6 +244,10 @@ class _SimulationScorer(_MetadataRequester):
         )
 
 
+@validate_params(
+    {"metric": [StrOptions(set(_METRICS))], "n_transient": [Integers(0, None, closed="left")]},
+    prefer_skip_nested_validation=True,
+)
 def make_transient_scorer(metric="rms", *, n_transient=0):
     """Scorer for ``GridSearchCV(scoring=...)`` that skips a transient.
 
@@ -246,8 +280,4 @@ def make_transient_scorer(metric="rms", *, n_transient=0):
     >>> bool(scorer(model, u, y) <= 0.0)
     True
     """
-    if metric not in _METRICS:
-        raise ValueError(f"metric must be one of {sorted(_METRICS)}, got {metric!r}.")
-    if n_transient < 0:
-        raise ValueError(f"n_transient must be non-negative, got {n_transient}.")
     return _SimulationScorer(metric, n_transient=n_transient)

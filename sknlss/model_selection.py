@@ -9,16 +9,18 @@ error on the end of the records that all of them held out.
 """
 
 import warnings
-from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, MetaEstimatorMixin, RegressorMixin, clone
+from sklearn.exceptions import FitFailedWarning
 from sklearn.model_selection import ParameterGrid
 from sklearn.utils._param_validation import HasMethods
-from sklearn.utils.parallel import Parallel, delayed
 from sklearn.utils.validation import check_is_fitted
 
+from ._core._multistart import run_starts
 from ._core._sequences import holdout_masks, sequence_bounds
+from ._estimators._base import _unfitted_on_error
+from ._validation import ANY_INTEGER, binary_magnitude, naming
 from .exceptions import SimulationDivergedWarning
 
 __all__ = ["HoldoutSearch"]
@@ -38,11 +40,16 @@ def _holdout_errors(model, X, Y, sequence_id, rows):
         simulated = np.asarray(model.predict(X, sequence_id=sequence_id)).reshape(Y.shape)
     if not np.all(np.isfinite(simulated[rows])):
         return -np.inf, np.inf
-    error = simulated[rows] - Y[rows]
-    mse = np.mean(error**2, axis=0)
-    variance = np.var(Y[rows], axis=0)
+    # In units of a power of two near each output's largest value, measured or
+    # simulated (an exact scaling), the squares cannot overflow; the RMS error
+    # is scaled back.
+    unit = np.maximum(binary_magnitude(Y[rows]), binary_magnitude(simulated[rows]))
+    measured = Y[rows] / unit
+    mse = np.mean((simulated[rows] / unit - measured) ** 2, axis=0)
+    variance = np.var(measured, axis=0)
     r2 = 1.0 - mse / np.where(variance > 0, variance, 1.0)
-    return float(np.mean(r2)), float(np.sqrt(np.mean(mse)))
+    top = unit.max()
+    return float(np.mean(r2)), float(top * np.sqrt(np.mean(mse * (unit / top) ** 2)))
 
 
 class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
@@ -85,9 +92,10 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         Its position in the lists of ``results_``.
     results_ : dict of lists
         Per candidate: ``params``, ``holdout_score`` (coefficient of
-        determination, ``-inf`` for a diverging simulation) and
+        determination, ``-inf`` for a diverging simulation or a failed fit),
         ``holdout_rms`` (RMS error in output units, averaged over the outputs
-        as mean squares).
+        as mean squares; ``inf`` likewise) and ``error`` (the message of the
+        error that stopped the candidate's fit, None when it fitted).
     holdout_fraction_ : float
         Share of the end of every sequence on which the candidates are ranked.
     n_features_in_ : int
@@ -122,7 +130,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         "estimator": [HasMethods(["fit", "predict", "get_params"])],
         "validation_fractions": ["array-like"],
         "param_grid": [dict, list, None],
-        "n_jobs": [Integral, None],
+        "n_jobs": [ANY_INTEGER, None],
     }
 
     def __init__(self, estimator, *, validation_fractions=(0.25, 0.275, 0.3, 0.325, 0.35),
@@ -133,29 +141,44 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         self.n_jobs = n_jobs
 
     def _candidates(self):
-        fractions = np.asarray(self.validation_fractions, dtype=np.float64).ravel()
-        if fractions.size == 0 or np.any((fractions <= 0) | (fractions >= 1)):
+        with naming("validation_fractions"):
+            fractions = np.asarray(self.validation_fractions, dtype=np.float64).ravel()
+        if fractions.size == 0 or not np.all((fractions > 0) & (fractions < 1)):
             raise ValueError(
                 "validation_fractions must hold at least one share strictly between "
                 f"0 and 1; got {self.validation_fractions!r}."
             )
         if "validation_fraction" not in self.estimator.get_params():
             raise ValueError(
-                f"{type(self.estimator).__name__} has no validation_fraction "
+                f"estimator={type(self.estimator).__name__}() has no validation_fraction "
                 "parameter: it cannot hold out the end of the records."
             )
-        grid = ParameterGrid({} if self.param_grid is None else self.param_grid)
+        with naming("param_grid"):
+            grid = ParameterGrid({} if self.param_grid is None else self.param_grid)
         for params in grid:
             if "validation_fraction" in params:
                 raise ValueError(
                     "param_grid must not set validation_fraction; use "
                     "validation_fractions."
                 )
-        return [{**params, "validation_fraction": float(fraction)}
-                for params in grid for fraction in fractions], float(fractions.min())
+        candidates = [{**params, "validation_fraction": float(fraction)}
+                      for params in grid for fraction in fractions]
+        if not candidates:
+            raise ValueError(
+                f"param_grid={self.param_grid!r} holds no setting to try; use None to "
+                "vary the held-out share only."
+            )
+        return candidates, float(fractions.min())
 
+    @_unfitted_on_error
     def fit(self, X, y, *, sequence_id=None):
         """Fit every candidate and keep the best on the common held-out end.
+
+        A candidate whose fit raises an error is ranked last (with a
+        :class:`~sklearn.exceptions.FitFailedWarning`); the error of the first
+        candidate is raised when none fits. A
+        :class:`~sknlss.SimulationDivergedWarning` says when the simulations of
+        all fitted candidates diverge on the held-out end.
 
         Parameters
         ----------
@@ -172,26 +195,46 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
             The fitted search.
         """
         self._validate_params()
-        candidates, self.holdout_fraction_ = self._candidates()
-        models = Parallel(n_jobs=self.n_jobs)(
-            delayed(_fit_candidate)(self.estimator, params, X, y, sequence_id)
-            for params in candidates
-        )
+        candidates, holdout_fraction = self._candidates()
+        # A candidate whose numerics fail leaves the others standing.
+        models = run_starts(_fit_candidate, [(self.estimator, params, X, y, sequence_id)
+                                             for params in candidates], n_jobs=self.n_jobs)
+        fitted = [i for i, model in enumerate(models) if not isinstance(model, Exception)]
+        if not fitted:
+            raise models[0]
+        if len(fitted) < len(models):
+            failed = next(model for model in models if isinstance(model, Exception))
+            warnings.warn(
+                f"{len(models) - len(fitted)} of {len(models)} candidates failed to fit "
+                f"and are ranked last (see results_['error']); the first error: {failed}",
+                FitFailedWarning, stacklevel=3)
         # The candidates validated the data; the ranking only needs them as arrays.
         X_checked = np.asarray(X, dtype=np.float64)
         Y = np.asarray(y, dtype=np.float64).reshape(len(X_checked), -1)
         starts = sequence_bounds(sequence_id, len(X_checked))
         n_transient = self.estimator.get_params().get("n_transient", 0)
-        rows = holdout_masks(starts, n_transient, self.holdout_fraction_)[1]
-        errors = [_holdout_errors(model, X_checked, Y, sequence_id, rows)
+        rows = holdout_masks(starts, n_transient, holdout_fraction)[1]
+        errors = [(-np.inf, np.inf) if isinstance(model, Exception)
+                  else _holdout_errors(model, X_checked, Y, sequence_id, rows)
                   for model in models]
         scores = [score for score, _ in errors]
-        self.best_index_ = best = int(np.argmax(scores))
+        # The first of the best fitted candidates (the first fitted one when
+        # all diverge).
+        best = max(fitted, key=lambda i: scores[i])
+        if scores[best] == -np.inf:
+            warnings.warn(
+                "The simulation of every fitted candidate diverges on the held-out end: "
+                f"the first one ({candidates[best]}) is kept, but no candidate simulates "
+                "these data.", SimulationDivergedWarning, stacklevel=3)
+        self.holdout_fraction_ = holdout_fraction
         self.results_ = {
             "params": candidates,
             "holdout_score": scores,
             "holdout_rms": [rms for _, rms in errors],
+            "error": [str(model) if isinstance(model, Exception) else None
+                      for model in models],
         }
+        self.best_index_ = best
         self.best_estimator_ = models[best]
         self.best_params_ = candidates[best]
         self.best_score_ = scores[best]

@@ -7,9 +7,13 @@ new figure, and returns the figure it drew into. Legends are placed outside
 the data, to the right of the Axes.
 """
 
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
+from sklearn.utils._param_validation import validate_params
+
+from ._validation import POSITIVE_FINITE, Integers
+from .metrics import rms_error
 
 __all__ = ["plot_frf", "plot_simulation", "plot_error_spectrum"]
 
@@ -44,20 +48,8 @@ def _single_axes(ax):
     return _check_axes(ax)
 
 
-def _check_sampling_time(sampling_time):
-    if sampling_time is None:
-        return None
-    if (isinstance(sampling_time, bool) or not isinstance(sampling_time, Real)
-            or not np.isfinite(sampling_time) or sampling_time <= 0):
-        raise ValueError(
-            f"sampling_time must be a positive finite number, got {sampling_time!r}."
-        )
-    return float(sampling_time)
-
-
 def _frequency_axis(frequencies, sampling_time):
     """Frequencies in Hz when the sampling time is known, else in cycles/sample."""
-    sampling_time = _check_sampling_time(sampling_time)
     if sampling_time is None:
         return frequencies, "Frequency (cycles/sample)"
     return frequencies / sampling_time, "Frequency (Hz)"
@@ -65,21 +57,13 @@ def _frequency_axis(frequencies, sampling_time):
 
 def _time_axis(n_samples, sampling_time):
     """Time in seconds when the sampling time is known, else in samples."""
-    sampling_time = _check_sampling_time(sampling_time)
     if sampling_time is None:
         return np.arange(n_samples), "Time (samples)"
     return sampling_time * np.arange(n_samples), "Time (s)"
 
 
-def _check_index(index, name):
-    if isinstance(index, bool) or not isinstance(index, Integral):
-        raise ValueError(f"{name} must be an integer, got {index!r}.")
-    return int(index)
-
-
 def _signal(values, output_index, name, non_finite_hint=""):
     """Column ``output_index`` of a non-empty, finite 1-D or 2-D signal, as 1-D floats."""
-    output_index = _check_index(output_index, "output_index")
     try:
         values = np.asarray(values, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -165,6 +149,25 @@ def _bla_entry(bla, name, n_freq, output_index, input_index):
     return values
 
 
+_COMMON_CONSTRAINTS = {
+    "sampling_time": [POSITIVE_FINITE, None],
+    "output_index": [Integers(0, None, closed="left")],
+    "ax": "no_validation",  # one Axes or a sequence of them, checked where drawn
+}
+_SIGNAL_CONSTRAINTS = {
+    **_COMMON_CONSTRAINTS,
+    "y_true": ["array-like"],
+    "y_pred": ["array-like", dict],
+    "unit": [str, None],
+    "label": [str],
+}
+
+
+@validate_params(
+    {**_COMMON_CONSTRAINTS, "bla": "no_validation",  # its fitted attributes are checked
+     "input_index": [Integers(0, None, closed="left")]},
+    prefer_skip_nested_validation=True,
+)
 def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None):
     """Plot the Best Linear Approximation with its noise and distortion levels.
 
@@ -236,8 +239,6 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
             "plot_frf needs a fitted BLAEstimator; the object has no attribute(s) "
             f"{', '.join(missing)}."
         )
-    output_index = _check_index(output_index, "output_index")
-    input_index = _check_index(input_index, "input_index")
     frequencies = np.asarray(bla.frequencies_, dtype=float)
     if frequencies.ndim != 1 or frequencies.size == 0 or not np.all(np.isfinite(frequencies)):
         raise ValueError(
@@ -323,6 +324,7 @@ def _view_limits(values, keep, margin_fraction):
     return low - pad, high + pad
 
 
+@validate_params(_SIGNAL_CONSTRAINTS, prefer_skip_nested_validation=True)
 def plot_simulation(y_true, y_pred, *, sampling_time=None, output_index=0, unit=None,
                     label="model", ax=None):
     """Plot a measured output with each model's simulated output and error, one panel each.
@@ -421,7 +423,7 @@ def plot_simulation(y_true, y_pred, *, sampling_time=None, output_index=0, unit=
                        label=f"{name} (simulated)")
         output_ax.set_ylim(output_limits)
         output_ax.set_ylabel(f"Output{in_unit}")
-        rms = np.sqrt(np.mean(errors[name] ** 2))
+        rms = rms_error(measured, predictions[name])
         error_ax.axhline(0.0, color="0.6", linewidth=0.8)
         error_ax.plot(time, errors[name], color=colour, linewidth=1.0,
                       label=f"RMS error {rms:.3g} {unit or ''}".rstrip())
@@ -442,6 +444,11 @@ def plot_simulation(y_true, y_pred, *, sampling_time=None, output_index=0, unit=
     return panels[0][0].figure
 
 
+@validate_params(
+    {**_SIGNAL_CONSTRAINTS,
+     "noise_level": [Real, "array-like", None]},
+    prefer_skip_nested_validation=True,
+)
 def plot_error_spectrum(y_true, y_pred, *, noise_level=None, sampling_time=None,
                         output_index=0, unit=None, label="model", ax=None):
     """Plot the DFT of the measured output and of the model error(s).

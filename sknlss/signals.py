@@ -7,10 +7,12 @@ that are left out (even lines of an odd multisine, the dropped odd lines of a
 random-odd one) reveal even and odd nonlinear distortions.
 """
 
-from numbers import Integral, Real
-
 import numpy as np
 from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import StrOptions, validate_params
+
+from ._core._memory import check_memory
+from ._validation import POSITIVE_FINITE, Integers, binary_magnitude, naming
 
 __all__ = ["multisine"]
 
@@ -54,10 +56,6 @@ def _select_lines(n_samples_per_period, lines, band, group_size, rng):
                 f"Nyquist line), got {selected[0]}..{selected[-1]}."
             )
         return selected
-    if lines not in _LINE_SETS:
-        raise ValueError(
-            f"lines must be one of {_LINE_SETS} or an integer array, got {lines!r}."
-        )
     candidates = _band_lines(n_samples_per_period, band)
     if lines == "full":
         selected = candidates
@@ -84,10 +82,11 @@ def _select_lines(n_samples_per_period, lines, band, group_size, rng):
 def _line_amplitudes(amplitudes, lines, n_samples_per_period):
     if amplitudes is None:
         return np.ones(len(lines))
-    if callable(amplitudes):
-        values = np.asarray(amplitudes(lines / n_samples_per_period), dtype=np.float64)
-    else:
-        values = np.asarray(amplitudes, dtype=np.float64)
+    with naming("amplitudes"):
+        if callable(amplitudes):
+            values = np.asarray(amplitudes(lines / n_samples_per_period), dtype=np.float64)
+        else:
+            values = np.asarray(amplitudes, dtype=np.float64)
     if values.shape != lines.shape:
         raise ValueError(
             f"amplitudes must give one value per excited line ({len(lines)}), got "
@@ -97,9 +96,25 @@ def _line_amplitudes(amplitudes, lines, n_samples_per_period):
         raise ValueError(
             "amplitudes must be finite, non-negative and not all zero."
         )
-    return values
+    # Only relative amplitudes matter; an exact power-of-two scaling keeps the
+    # signal's squares from overflowing (or underflowing) before its RMS is set.
+    return values / binary_magnitude(values)
 
 
+@validate_params(
+    {
+        "n_samples_per_period": [Integers(3, None, closed="left")],
+        "n_periods": [Integers(1, None, closed="left")],
+        "n_realizations": [Integers(1, None, closed="left")],
+        "lines": [StrOptions(set(_LINE_SETS)), "array-like"],
+        "band": ["array-like"],
+        "rms": [POSITIVE_FINITE],
+        "amplitudes": ["array-like", callable, None],
+        "group_size": [Integers(2, None, closed="left")],
+        "random_state": ["random_state"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def multisine(n_samples_per_period, *, n_periods=1, n_realizations=1, lines="odd",
               band=(0.0, 0.45), rms=1.0, amplitudes=None, group_size=4,
               random_state=None):
@@ -169,14 +184,11 @@ def multisine(n_samples_per_period, *, n_periods=1, n_realizations=1, lines="odd
     >>> round(float(np.sqrt(np.mean(u ** 2))), 12)
     0.5
     """
-    for name, value, low in (("n_samples_per_period", n_samples_per_period, 3),
-                             ("n_periods", n_periods, 1),
-                             ("n_realizations", n_realizations, 1),
-                             ("group_size", group_size, 2)):
-        if not isinstance(value, Integral) or isinstance(value, bool) or value < low:
-            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}.")
-    if not isinstance(rms, Real) or not np.isfinite(rms) or rms <= 0:
-        raise ValueError(f"rms must be a positive finite number, got {rms!r}.")
+    # The signals, and the spectra and the period they are computed from.
+    check_memory(8 * n_realizations * n_samples_per_period * (n_periods + 3),
+                 f"A multisine of {n_realizations} realization(s) of {n_periods} period(s) "
+                 f"of {n_samples_per_period} samples (n_realizations, n_periods, "
+                 "n_samples_per_period)")
     rng = check_random_state(random_state)
     n = int(n_samples_per_period)
     excited = _select_lines(n, lines, band, group_size, rng)

@@ -167,12 +167,28 @@ def test_offsets_removed_and_restored(data):
     np.testing.assert_allclose(y_pred, expected, rtol=1e-12)
 
 
-def test_constant_signals_get_unit_scale():
+def test_constant_signals_refused():
+    # A constant signal carries no information about the dynamics; its zero
+    # variance used to reach the BLA's weights as a LinAlgError.
     X = np.column_stack([np.full(20, 3.0), np.arange(20.0)])
-    model = _FirstOrder().fit(X, np.full(20, 7.0))
-    np.testing.assert_array_equal(model.u_scale_[0], 1.0)
-    np.testing.assert_array_equal(model.y_scale_, [1.0])
-    assert np.all(np.isfinite(model.predict(X)))
+    with pytest.raises(ValueError, match=r"X is constant in input column\(s\) \[0\]"):
+        _FirstOrder().fit(X, np.arange(20.0) ** 2)
+    with pytest.raises(ValueError, match=r"y is constant in output\(s\) \[1\]"):
+        _FirstOrder().fit(X[:, 1:], np.column_stack([np.arange(20.0), np.zeros(20)]))
+
+
+def test_extreme_magnitudes_scaled_exactly():
+    # The statistics are taken after an exact power-of-two scaling: huge and
+    # tiny signals normalise like ordinary ones.
+    rng = np.random.default_rng(0)
+    X, y = rng.standard_normal((50, 1)), rng.standard_normal(50)
+    reference = _FirstOrder().fit(X, y)
+    for factor in (2.0**600, 2.0**-600, 2.0**1000):
+        model = _FirstOrder().fit(X * factor, y * factor)
+        assert model.u_scale_[0] == reference.u_scale_[0] * factor
+        assert model.y_offset_[0] == reference.y_offset_[0] * factor
+        np.testing.assert_array_equal(model.predict(X * factor), reference.predict(X) * factor)
+        assert model.score(X * factor, y * factor) == pytest.approx(reference.score(X, y))
 
 
 def test_multi_output(data):

@@ -109,9 +109,9 @@ def test_plot_frf_rejects_unfitted_or_invalid_input():
     bla.frequencies_ = np.array([])
     with pytest.raises(ValueError, match=r"bla\.frequencies_ must be a non-empty"):
         plot_frf(bla)
-    with pytest.raises(ValueError, match="sampling_time must be a positive"):
+    with pytest.raises(ValueError, match="'sampling_time' parameter"):
         plot_frf(_fake_bla(), sampling_time=-1.0)
-    with pytest.raises(ValueError, match="input_index must be an integer"):
+    with pytest.raises(ValueError, match="'input_index' parameter"):
         plot_frf(_fake_bla(), input_index=0.5)
     with pytest.raises(ValueError, match="ax must be a matplotlib Axes"):
         plot_frf(_fake_bla(), ax="left")

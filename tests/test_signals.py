@@ -97,14 +97,14 @@ def test_explicit_lines_and_amplitudes():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"lines": "even"}, "lines must be one of"),
+        ({"lines": "even"}, "'lines' parameter"),
         ({"lines": [0, 3]}, "Excited lines must lie"),
         ({"lines": [3, 32]}, "Excited lines must lie"),
         ({"lines": [1.5]}, "integer array"),
         ({"band": (0.3, 0.2)}, "band must satisfy"),
-        ({"band": 0.2}, "band must be a pair"),
+        ({"band": 0.2}, "'band' parameter"),
         ({"band": (0.0, 0.001)}, "No line"),
-        ({"rms": 0.0}, "rms must be"),
+        ({"rms": 0.0}, "'rms' parameter"),
         ({"n_periods": 0}, "n_periods"),
         ({"n_realizations": 1.5}, "n_realizations"),
         ({"amplitudes": [1.0, 2.0]}, "one value per excited line"),

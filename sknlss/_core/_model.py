@@ -8,6 +8,8 @@ parameter vector is defined here once, for the kernels and for Python:
     theta = [vec(A), vec(B), vec(C), vec(D), theta_terms, x0 (if estimated)]
 """
 
+import math
+
 import numpy as np
 
 from . import _kernels
@@ -21,6 +23,11 @@ def _array(values, dtype=np.float64):
 
 def _contiguous(U, starts):
     return _array(U), _array(starts, np.int64)
+
+
+def parameter_count(blocks):
+    """Number of parameters in blocks ``(name, shape)`` (exact for any size)."""
+    return sum(math.prod(shape) for _, shape in blocks)
 
 
 class Terms:
@@ -45,7 +52,7 @@ class Terms:
     @property
     def n_params(self):
         """Number of parameters of the terms."""
-        return int(sum(np.prod(shape, dtype=np.int64) for _, shape in self.blocks))
+        return parameter_count(self.blocks)
 
     def decay_mask(self):
         """Which of the terms' parameters the weight decay acts on (all by default)."""

@@ -7,13 +7,13 @@ from ._optimize import levenberg_marquardt
 
 # What a start may raise and still leave the others standing: a starting
 # point from which a simulation or a factorisation fails numerically.
-_START_ERRORS = (ValueError, FloatingPointError, np.linalg.LinAlgError)
+START_ERRORS = (ValueError, FloatingPointError, np.linalg.LinAlgError)
 
 
 def _guarded(fit_one, *args):
     try:
         return fit_one(*args)
-    except _START_ERRORS as error:
+    except START_ERRORS as error:
         return error
 
 
@@ -71,7 +71,7 @@ def fit_from(problem, candidates, *, label, **options):
             break
     else:
         raise ValueError(
-            f"{label}: no starting point can be simulated on the estimation data."
+            f"{label}: no starting point can be simulated on the estimation data (X, y)."
         )
     result = levenberg_marquardt(problem.residual, theta0,
                                  validation_loss=problem.validation_loss, label=label,

@@ -178,7 +178,7 @@ def levenberg_marquardt(
     if r is None or not np.all(np.isfinite(r)) or not np.all(np.isfinite(J)):
         raise ValueError(
             "The initial model diverges or gives non-finite values on the "
-            "estimation data; it cannot start the optimisation."
+            "estimation data (X, y); it cannot start the optimisation."
         )
     m = r.size
     cost = float(r @ r)
@@ -194,6 +194,12 @@ def levenberg_marquardt(
     n_iter = 0
     with threadpool_limits(limits=1, user_api="blas"):
         while n_iter < max_iter:
+            if not np.all(np.isfinite(J)):
+                # The sensitivities of the current iterate overflowed although
+                # its outputs are finite: no step can be computed from them
+                # (LAPACK would reject the NaN), so the search ends here.
+                converged = True
+                break
             s, Vt, col_scale, projected = _scaled_step_factors(J, r)
             rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps))
             rank = max(1, min(rank, s.size - n_drop))

@@ -277,7 +277,10 @@ class SimulationErrorProblem:
             J = J.reshape(r.size, -1)
         extra = []
         if self.stability_penalty:
-            extra.append(self._stability_rows(theta, X, r.size, jacobian))
+            stability = self._stability_rows(theta, X, r.size, jacobian)
+            if stability is None:
+                return None, None
+            extra.append(stability)
         if self.weight_decay:
             extra.append(self._decay_rows(theta, jacobian))
         if extra:
@@ -296,11 +299,17 @@ class SimulationErrorProblem:
         the radius exceeds 1 only: elsewhere the rows are flat); the states' own dependence on the
         parameters is neglected (a Gauss-Newton-type approximation: the cost
         itself is exact, so every accepted step still lowers it).
+
+        None when the local Jacobians overflow along the trajectory: the state
+        map is then as unstable as a divergence.
         """
         model = self.model
         n = model.n_states
         S = self._fitted_points(X)
-        radius, gradient = spectral_radius(model.local_jacobians(theta, S)[:, :n])
+        local = model.local_jacobians(theta, S)[:, :n]
+        if not np.all(np.isfinite(local)):
+            return None
+        radius, gradient = spectral_radius(local)
         excess = np.maximum(radius - 1.0, 0.0)
         weight = np.sqrt(self.stability_penalty * n_residuals / len(S))
         rows = weight * excess

@@ -12,18 +12,23 @@ scales, the initial state, free-run simulation and scoring. Subclasses implement
 vector the shared kernels simulate).
 """
 
+import functools
 import warnings
 from abc import ABCMeta, abstractmethod
-from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.metrics import r2_score
-from sklearn.utils._param_validation import Interval
-from sklearn.utils.validation import check_is_fitted, validate_data
+from sklearn.utils.validation import (
+    check_array,
+    check_consistent_length,
+    check_is_fitted,
+    validate_data,
+)
 
 from .._core._kernels import DIVERGENCE_BOUND
 from .._core._sequences import sequence_bounds, transient_mask
+from .._validation import Integers, binary_magnitude, naming
 from ..exceptions import SimulationDivergedWarning
 
 #: The fitted attributes that describe the normalisation of the signals.
@@ -35,11 +40,60 @@ def normalisation_of(estimator):
     """The normalisation attributes of a fitted (or fitting) estimator, as a dict."""
     return {name: getattr(estimator, name) for name in _NORMALISATION}
 
-def _robust_scale(values):
-    """Standard deviation per column, with 1 where a column is (nearly) constant."""
-    scale = values.std(axis=0)
-    scale[scale <= 1e-12 * np.maximum(1.0, np.abs(values).max(axis=0))] = 1.0
-    return scale
+#: A column whose standard deviation is below this fraction of its largest
+#: magnitude is constant to working precision: it carries no signal.
+_CONSTANT = 1e-12
+
+
+def _offset_and_scale(values, argument, what):
+    """Mean and standard deviation of every column of ``values``.
+
+    The statistics are computed on the values divided by their
+    :func:`binary_magnitude`, so that the squares of values beyond 1e154 cannot
+    overflow. A constant column is a ValueError naming ``argument`` (``what``
+    names its columns).
+    """
+    magnitude = binary_magnitude(values)
+    scaled = values / magnitude
+    scale = scaled.std(axis=0)
+    constant = np.flatnonzero(~(scale > _CONSTANT * np.abs(scaled).max(axis=0)))
+    if constant.size:
+        raise ValueError(
+            f"{argument} is constant in {what} {constant.tolist()}: a constant signal "
+            "carries no information about the dynamics."
+        )
+    return scaled.mean(axis=0) * magnitude, scale * magnitude
+
+
+def _normalised(values, offset, scale):
+    """``(values - offset) / scale``, evaluated on halves (halving is exact) so
+    that the difference cannot overflow. Values far beyond the training range
+    may still give infinity; the simulation reports them as a divergence."""
+    with np.errstate(over="ignore"):
+        return np.ascontiguousarray((values / 2 - offset / 2) / (scale / 2))
+
+
+#: Fitted attributes without the trailing underscore of the public ones.
+_PRIVATE_FITTED = ("_y_was_1d", "_model")
+
+
+def _unfitted_on_error(fit):
+    """Decorate ``fit`` so that a fit that does not complete, whatever stops it
+    (an error, ``KeyboardInterrupt``), leaves the estimator unfitted rather than
+    with some of its fitted attributes set."""
+
+    @functools.wraps(fit)
+    def guarded_fit(self, *args, **kwargs):
+        try:
+            return fit(self, *args, **kwargs)
+        except BaseException:
+            for name in [name for name in vars(self)
+                         if (name.endswith("_") and not name.startswith("__"))
+                         or name in _PRIVATE_FITTED]:
+                delattr(self, name)
+            raise
+
+    return guarded_fit
 
 
 class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
@@ -50,7 +104,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
     """
 
     _parameter_constraints: dict = {
-        "n_transient": [Interval(Integral, 0, None, closed="left")],
+        "n_transient": [Integers(0, None, closed="left")],
     }
 
     def __sklearn_tags__(self):
@@ -67,22 +121,29 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         Returns the normalised inputs ``U`` (n_samples, n_inputs), outputs
         ``Y`` (n_samples, n_outputs) and the sequence boundaries.
         """
-        X, y = validate_data(
-            self, X, y, multi_output=True, y_numeric=True, dtype=np.float64,
-            ensure_min_samples=2,
-        )
+        # X and y are checked one after the other, so that an error names the
+        # argument at fault.
+        with naming("X"):
+            X = validate_data(self, X, dtype=np.float64, ensure_min_samples=2)
+        if y is None:
+            raise ValueError(
+                f"This {type(self).__name__} estimator requires y to be passed, but the "
+                "target y is None."
+            )
+        with naming("y"):
+            y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y")
+            check_consistent_length(X, y)
         self._y_was_1d = y.ndim == 1
         Y = y.reshape(len(y), -1) if y.ndim == 1 else y
         starts = sequence_bounds(sequence_id, X.shape[0])
         self.n_outputs_ = Y.shape[1]
-        self.u_offset_ = X.mean(axis=0)
-        self.u_scale_ = _robust_scale(X)
-        self.y_offset_ = Y.mean(axis=0)
-        self.y_scale_ = _robust_scale(Y)
-        U = np.ascontiguousarray((X - self.u_offset_) / self.u_scale_)
-        Yn = np.ascontiguousarray((Y - self.y_offset_) / self.y_scale_)
+        self.u_offset_, self.u_scale_ = _offset_and_scale(X, "X", "input column(s)")
+        self.y_offset_, self.y_scale_ = _offset_and_scale(Y, "y", "output(s)")
+        U = _normalised(X, self.u_offset_, self.u_scale_)
+        Yn = _normalised(Y, self.y_offset_, self.y_scale_)
         return U, Yn, starts
 
+    @_unfitted_on_error
     def fit(self, X, y, *, sequence_id=None):
         """Fit the model to input/output records.
 
@@ -137,7 +198,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         n_states = self.A_.shape[0]
         if x0 is None:
             x0 = self.x0_
-        x0 = np.asarray(x0, dtype=np.float64)
+        with naming("x0"):
+            x0 = np.asarray(x0, dtype=np.float64)
         if x0.ndim == 1:
             x0 = np.broadcast_to(x0, (n_sequences, x0.shape[0]))
         if x0.shape != (n_sequences, n_states) or not np.all(np.isfinite(x0)):
@@ -170,20 +232,27 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             State x(t) at each sample, returned when ``return_states`` is True.
         """
         check_is_fitted(self)
-        X = validate_data(self, X, reset=False, dtype=np.float64)
+        with naming("X"):
+            X = validate_data(self, X, reset=False, dtype=np.float64)
         starts = sequence_bounds(sequence_id, X.shape[0])
         x0 = self._initial_states(x0, len(starts) - 1)
-        U = np.ascontiguousarray((X - self.u_offset_) / self.u_scale_)
+        U = _normalised(X, self.u_offset_, self.u_scale_)
         Yn, states, diverged = self._simulate_normalized(U, starts, x0)
-        if diverged:
+        with np.errstate(over="ignore", invalid="ignore"):
+            Y = self.y_offset_ + self.y_scale_ * Yn
+        # Outputs beyond the floating-point range in the user's units (from
+        # outputs near 1e302 and above) are a divergence too.
+        overflow = np.isinf(Y)
+        Y[overflow] = np.nan
+        if diverged or overflow.any():
             warnings.warn(
-                "The simulated state left the bounded region (|x| > "
-                f"{DIVERGENCE_BOUND:g} in normalised units): the model is unstable "
-                "for this input; outputs after the divergence are NaN.",
+                "The simulation left the bounded region (a state or output beyond "
+                f"{DIVERGENCE_BOUND:g} in normalised units, or an output beyond the "
+                "floating-point range): the model is unstable for this input; the "
+                "outputs from the divergence on are NaN.",
                 SimulationDivergedWarning,
                 stacklevel=2,
             )
-        Y = self.y_offset_ + self.y_scale_ * Yn
         if self._y_was_1d:
             Y = Y[:, 0]
         return (Y, states) if return_states else Y
@@ -225,11 +294,17 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Coefficient of determination averaged uniformly over the outputs.
         """
         y_pred = self.predict(X, sequence_id=sequence_id)
-        y = np.asarray(y)
+        with naming("y"):
+            y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y")
         if y.shape[0] != y_pred.shape[0]:
             raise ValueError(
                 f"X and y have different numbers of samples: {y_pred.shape[0]} and "
                 f"{y.shape[0]}."
+            )
+        y, y_pred = y.reshape(len(y), -1), y_pred.reshape(len(y_pred), -1)
+        if y.shape[1] != y_pred.shape[1]:
+            raise ValueError(
+                f"y has {y.shape[1]} output(s), the model was fitted on {y_pred.shape[1]}."
             )
         keep = transient_mask(sequence_bounds(sequence_id, len(y_pred)), self.n_transient)
         if not keep.any():
@@ -239,4 +314,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         y_pred = y_pred[keep]
         if not np.all(np.isfinite(y_pred)):
             return -np.inf
-        return r2_score(y[keep], y_pred)
+        # R² does not change under a scaling of each output; in normalised
+        # units its sums of squares cannot overflow.
+        return r2_score(_normalised(y[keep], self.y_offset_, self.y_scale_),
+                        _normalised(y_pred, self.y_offset_, self.y_scale_))

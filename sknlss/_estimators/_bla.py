@@ -7,7 +7,7 @@ estimators call it for their initialisation and expose the result as a fitted
 """
 
 from dataclasses import dataclass
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
@@ -24,12 +24,17 @@ from .._linear._realization import (
     refine_frf,
     ss_frf,
 )
+from .._validation import Integers
 from ._base import _BaseStateSpace, normalisation_of
 
 # Variances below this fraction of the mean squared FRF magnitude (a relative
 # standard deviation of 1e-6) are treated as this floor, so that noise-free
 # lines do not receive unbounded weights.
 _RELATIVE_VARIANCE_FLOOR = 1e-12
+# The signals are normalised to unit variance: a variance below the squared
+# machine precision is rounding, not noise. Without this floor, a record with
+# (nearly) no linear response gives weights beyond 1e150 whose squares overflow.
+_ABSOLUTE_VARIANCE_FLOOR = np.finfo(float).eps ** 2
 
 
 def _weights(estimate, weighting):
@@ -44,8 +49,8 @@ def _weights(estimate, weighting):
         var = None
     if var is None:
         return np.ones(estimate.frf.shape)
-    floor = _RELATIVE_VARIANCE_FLOOR * max(np.mean(np.abs(estimate.frf) ** 2),
-                                           np.finfo(float).tiny)
+    floor = max(_RELATIVE_VARIANCE_FLOOR * np.mean(np.abs(estimate.frf) ** 2),
+                _ABSOLUTE_VARIANCE_FLOOR)
     return 1.0 / np.sqrt(np.maximum(var, floor))
 
 
@@ -123,7 +128,15 @@ def fit_linear_model(U, Y, starts, params):
     # The factorisations here are small: multithreaded BLAS only adds
     # synchronisation cost (tenfold on two cores, see DESIGN.md §2).
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit_linear_model(U, Y, starts, params)
+        try:
+            return _fit_linear_model(U, Y, starts, params)
+        except np.linalg.LinAlgError as error:
+            # Records far from any linear system (a spike that dwarfs the rest of
+            # the record) can leave the FRF without a usable factorisation.
+            raise ValueError(
+                f"The Best Linear Approximation cannot be computed from these data "
+                f"(X, y): {error}."
+            ) from error
 
 
 def _fit_linear_model(U, Y, starts, params):
@@ -168,15 +181,19 @@ def _set_fitted(bla, fit, normalisation):
     bla.y_offset_ = normalisation["y_offset_"] + normalisation["y_scale_"] * fit.output_offset
     bla.hankel_singular_values_ = fit.hankel_singular_values
     bla.frequencies_ = fit.frequencies
-    scale = normalisation["y_scale_"][:, None] / normalisation["u_scale_"][None, :]
-    bla.frf_ = fit.frf * scale
-    bla.frf_model_ = fit.frf_model * scale
-    noise, total = fit.noise_variance, fit.total_variance
-    bla.noise_variance_ = None if noise is None else noise * scale**2
-    if total is None:
-        bla.total_variance_ = None
-    else:
-        bla.total_variance_ = bla.noise_variance_ if total is noise else total * scale**2
+    # In the user's units, an FRF or a variance beyond the floating-point range
+    # (outputs of 1e200 for inputs of 1e-200) is infinite; the model itself
+    # works in normalised units.
+    with np.errstate(over="ignore", invalid="ignore"):
+        scale = normalisation["y_scale_"][:, None] / normalisation["u_scale_"][None, :]
+        bla.frf_ = fit.frf * scale
+        bla.frf_model_ = fit.frf_model * scale
+        noise, total = fit.noise_variance, fit.total_variance
+        bla.noise_variance_ = None if noise is None else noise * scale**2
+        if total is None:
+            bla.total_variance_ = None
+        else:
+            bla.total_variance_ = bla.noise_variance_ if total is noise else total * scale**2
     bla.n_iter_, bla.loss_history_ = fit.n_iter, fit.loss_history
     bla.n_params_ = n * n + n * (fit.B.shape[1] + n_y) + n_y * fit.B.shape[1]
     if bla.estimate_x0:
@@ -376,14 +393,14 @@ class BLAEstimator(_BaseStateSpace):
 
     _parameter_constraints: dict = {
         **_BaseStateSpace._parameter_constraints,
-        "n_states": [Interval(Integral, 1, None, closed="left")],
-        "period": [Interval(Integral, 3, None, closed="left"), None],
+        "n_states": [Integers(1, None, closed="left")],
+        "period": [Integers(3, None, closed="left"), None],
         "method": [StrOptions({"auto", "robust", "lpm"})],
-        "lpm_order": [Interval(Integral, 0, None, closed="left")],
-        "lpm_bandwidth": [Interval(Integral, 1, None, closed="left"), None],
+        "lpm_order": [Integers(0, None, closed="left")],
+        "lpm_bandwidth": [Integers(1, None, closed="left"), None],
         "max_frequency": [Interval(Real, 0, 0.5, closed="right"), None],
         "weighting": [StrOptions({"total", "noise"}), None],
-        "max_iter": [Interval(Integral, 0, None, closed="left")],
+        "max_iter": [Integers(0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "estimate_x0": ["boolean"],
         "verbose": ["verbose"],

@@ -6,16 +6,17 @@ the CPD of their Jacobians (:func:`~sknlss._terms._cpd.decouple_polynomial`); th
 decoupled model is then re-optimised on the simulation error.
 """
 
-from numbers import Integral
-
 import numpy as np
 from sklearn.base import clone
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+from sklearn.utils._param_validation import HasMethods, StrOptions
 
+from .._core._model import parameter_count
 from .._terms._bases import PolynomialBasis
 from .._terms._branches import BranchTerms
 from .._terms._cpd import decouple_polynomial
+from .._validation import Integers
+from ._base import _unfitted_on_error
 from ._nonlinear import _BaseNonlinearStateSpace
 from ._pnlss import PNLSSRegressor
 
@@ -269,15 +270,16 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     _parameter_constraints: dict = {
         **{key: value for key, value in _BaseNonlinearStateSpace._parameter_constraints.items()
            if key not in ("bla", "refine_linear")},
-        "rank": [Interval(Integral, 1, None, closed="left")],
-        "branch_degree": [Interval(Integral, 2, None, closed="left"), None],
-        "n_sampling_points": [Interval(Integral, 1, None, closed="left")],
+        "rank": [Integers(1, None, closed="left")],
+        "branch_degree": [Integers(2, None, closed="left"), None],
+        "n_sampling_points": [Integers(1, None, closed="left")],
         "sampling": [StrOptions({"normal", "trajectory"})],
         "pnlss": [HasMethods(["fit", "get_params"]), None],
-        "n_restarts": [Interval(Integral, 1, None, closed="left")],
+        "n_restarts": [Integers(1, None, closed="left")],
     }
 
     _label = "DecoupledPNLSS"
+    _structure_params = ("n_states", "rank", "branch_degree")
 
     def __init__(
         self,
@@ -326,6 +328,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self.n_transient = n_transient
         self.verbose = verbose
 
+    @_unfitted_on_error
     def fit(self, X, y, *, sequence_id=None):
         """Fit the PNLSS model, decouple it and re-optimise the decoupled model.
 
@@ -366,6 +369,11 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self.branch_degree_ = self._branch_degree()
         return BranchTerms(self.n_states, n_inputs, n_outputs, self.rank,
                            PolynomialBasis(self.branch_degree_, constant=False))
+
+    def _n_terms_params(self, n_inputs, n_outputs):
+        n_functions = PolynomialBasis(self._branch_degree()).n_functions
+        return parameter_count(BranchTerms.layout(self.n_states, n_inputs, n_outputs,
+                                                  self.rank, n_functions))
 
     def _n_drop(self, model):
         # Similarity transforms of the states and the scaling of each branch's

@@ -20,15 +20,14 @@ and their best rank-one factors give ``Bw``, ``Dw`` and the coefficients.
 Levenberg-Marquardt then minimises the simulation error over all parameters.
 """
 
-from numbers import Integral
-
 import numpy as np
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import HasMethods, Interval
+from sklearn.utils._param_validation import HasMethods
 
-from .._core._model import StateSpaceModel
+from .._core._model import StateSpaceModel, parameter_count
 from .._terms._bases import PolynomialBasis
 from .._terms._branches import BranchTerms
+from .._validation import Integers
 from ._nonlinear import _BaseNonlinearStateSpace
 
 # Relative ridge of the least squares of the initialisation: it only keeps
@@ -271,11 +270,12 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
 
     _parameter_constraints: dict = {
         **_BaseNonlinearStateSpace._parameter_constraints,
-        "n_branches": [Interval(Integral, 1, None, closed="left")],
+        "n_branches": [Integers(1, None, closed="left")],
         "basis": [HasMethods(["evaluate"]), None],
     }
 
     _label = "NL-LFR"
+    _structure_params = ("n_states", "n_branches", "basis")
 
     def __init__(self, n_states=2, *, n_branches=1, basis=None, estimate_x0=False,
                  period=None, cost="time", stability_penalty=0.0, weight_decay=0.0,
@@ -308,6 +308,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     def _make_terms(self, n_inputs, n_outputs):
         return BranchTerms(self.n_states, n_inputs, n_outputs, self.n_branches,
                            self._basis())
+
+    def _n_terms_params(self, n_inputs, n_outputs):
+        return parameter_count(BranchTerms.layout(self.n_states, n_inputs, n_outputs,
+                                                  self.n_branches, self._basis().n_functions))
 
     def _n_drop(self, model):
         # Similarity transforms of the states, the scaling of each branch's

@@ -14,7 +14,7 @@ simulation error (paper eq. 18) with Levenberg-Marquardt.
 """
 
 import warnings
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
@@ -23,9 +23,11 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from threadpoolctl import threadpool_limits
 
+from .._core._model import parameter_count
 from .._core._sequences import part_before_holdout
 from .._linear._state_estimation import estimate_states
 from .._terms._network import ACTIVATIONS, NetworkTerms
+from .._validation import Integers
 from ._nonlinear import _BaseNonlinearStateSpace, holdout_loss
 
 #: Candidate state-estimation weights tried by ``alpha="auto"``.
@@ -343,11 +345,12 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     _parameter_constraints: dict = {
         **_BaseNonlinearStateSpace._parameter_constraints,
         "alpha": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
-        "n_neurons": [Interval(Integral, 1, None, closed="left")],
+        "n_neurons": [Integers(1, None, closed="left")],
         "activation": [StrOptions(set(ACTIVATIONS))],
     }
 
     _label = "NLSS2"
+    _structure_params = ("n_states", "n_neurons")
 
     def __init__(self, n_states=2, *, alpha=0.3, n_neurons=2, activation="sigmoid",
                  estimate_x0=False, period=None, cost="time", stability_penalty=0.0,
@@ -378,6 +381,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     def _make_terms(self, n_inputs, n_outputs):
         return NetworkTerms(self.n_states, n_inputs, n_outputs, self.n_neurons,
                             self.activation)
+
+    def _n_terms_params(self, n_inputs, n_outputs):
+        return parameter_count(NetworkTerms.layout(self.n_states, n_inputs, n_outputs,
+                                                   self.n_neurons))
 
     def _n_drop(self, model):
         # Diagonal rescalings of the states compensated in the networks'

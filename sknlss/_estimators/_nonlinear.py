@@ -22,16 +22,19 @@ A subclass provides its terms (``_make_terms``), its starting points
 
 import warnings
 from abc import abstractmethod
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
+from joblib import effective_n_jobs
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from .._core._memory import check_memory
 from .._core._model import StateSpaceModel
-from .._core._multistart import fit_from, run_starts
+from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import part_before_holdout, steady_state_rows
+from .._validation import ANY_INTEGER, Integers
 from ..exceptions import LinearFallbackWarning
 from ._base import _BaseStateSpace, normalisation_of
 from ._bla import BLAEstimator, fit_linear_model, fitted_bla
@@ -53,6 +56,10 @@ _MAX_TRANSIENT_SHARE = 0.1
 #: when the estimation input is enlarged by a fifth (see ``stays_bounded``).
 _GUARD_GAIN = 1.2
 _GUARD_RANGE = 10.0
+#: Copies of the Jacobian a Levenberg-Marquardt step holds at its peak: the
+#: one the kernel fills, the same stacked with the penalty rows, and the
+#: optimiser's column-scaled working copy that its QR factorisation overwrites.
+_JACOBIAN_COPIES = 3
 
 
 class _BaseNonlinearStateSpace(_BaseStateSpace):
@@ -60,31 +67,38 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 
     _parameter_constraints: dict = {
         **_BaseStateSpace._parameter_constraints,
-        "n_states": [Interval(Integral, 1, None, closed="left")],
+        "n_states": [Integers(1, None, closed="left")],
         "estimate_x0": ["boolean"],
-        "period": [Interval(Integral, 1, None, closed="left"), None],
+        "period": [Integers(1, None, closed="left"), None],
         "cost": [StrOptions({"time", "frequency"})],
         "stability_penalty": [Interval(Real, 0, None, closed="left")],
         "weight_decay": [Interval(Real, 0, None, closed="left")],
         "refine_linear": ["boolean"],
         "bla": [BLAEstimator, None],
-        "max_iter": [Interval(Integral, 0, None, closed="left")],
+        "max_iter": [Integers(0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "validation_fraction": [Interval(Real, 0, 1, closed="left"), StrOptions({"auto"})],
-        "n_iter_no_change": [Interval(Integral, 1, None, closed="left"), None],
-        "n_init": [Interval(Integral, 1, None, closed="left")],
-        "n_jobs": [Integral, None],
+        "n_iter_no_change": [Integers(1, None, closed="left"), None],
+        "n_init": [Integers(1, None, closed="left")],
+        "n_jobs": [ANY_INTEGER, None],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
     }
 
     #: Name of the model in progress lines and warnings.
     _label = "model"
+    #: The constructor parameters that set the number of parameters.
+    _structure_params = ("n_states",)
 
     # ------------------------------------------------------------ subclass API
     @abstractmethod
     def _make_terms(self, n_inputs, n_outputs):
         """The terms object of the model for the given dimensions."""
+
+    @abstractmethod
+    def _n_terms_params(self, n_inputs, n_outputs):
+        """Number of parameters of the terms ``_make_terms`` would build,
+        counted without building them."""
 
     @abstractmethod
     def _starting_points(self, context, start, seed):
@@ -147,6 +161,20 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self.bla_ = fitted_bla(params, linear, normalisation_of(self))
         return linear.A, linear.B, linear.C, linear.D, linear.x0
 
+    def _fit_linear_part(self, problem, theta):
+        """``theta`` with its linear part (and x0) refined on the simulation
+        error, the terms left as they are, and the search's result."""
+        model = problem.model
+        free = model.linear_columns
+        options = dict(self._lm_options(model), n_drop=model.n_states**2)
+        theta = theta.copy()
+        try:
+            theta[free], result = fit_from(problem.restricted(theta, free), [theta[free]],
+                                           label=f"{self._label} (linear part)", **options)
+        except START_ERRORS as failure:
+            raise self._unfittable(failure) from failure
+        return theta, result
+
     def _refined_linear_start(self, problem, theta):
         """The starting parameters with the linear part (and x0) refined on the
         simulation error, the terms switched off (with ``refine_linear``)."""
@@ -154,13 +182,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             return theta
         # A poor nonparametric BLA (short or noisy records) would otherwise
         # start the nonlinear search far away.
-        model = problem.model
-        free = model.linear_columns
-        options = dict(self._lm_options(model), n_drop=model.n_states**2)
-        theta = theta.copy()
-        theta[free] = fit_from(problem.restricted(theta, free), [theta[free]],
-                               label=f"{self._label} (linear part)", **options)[0]
-        return theta
+        return self._fit_linear_part(problem, theta)[0]
 
     def _record_start(self, context, start, seed):
         """Record what the kept start's initialisation found (nothing by default)."""
@@ -192,9 +214,64 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         limit = int(_MAX_TRANSIENT_SHARE * np.min(np.diff(starts)))
         return max(self.n_transient, min(settling, limit))
 
+    def _structure(self):
+        """The structure parameters and their values, for messages."""
+        return ", ".join(f"{name}={getattr(self, name)!r}" for name in self._structure_params)
+
+    def _unfittable(self, failure):
+        """The error of a fit that failed numerically: the data or the structure
+        (or both) are at fault, so it names them."""
+        return ValueError(f"{type(self).__name__}({self._structure()}): the model cannot "
+                          f"be fitted to the data (X, y): {failure}")
+
+    def _check_model_size(self, U, Y, starts, shares):
+        """Refuse, before anything is built, a model whose fit would not fit in memory.
+
+        The Levenberg-Marquardt Jacobian has a row per cost value (and per
+        penalty row) and a column per parameter; the number of parameters is
+        counted from the structure, since listing the terms of a huge model
+        alone can exhaust the memory.
+        """
+        n, n_u, n_y = self.n_states, U.shape[1], Y.shape[1]
+        n_terms = self._n_terms_params(n_u, n_y)
+        n_params = (n * n + n * n_u + n_y * n + n_y * n_u + n_terms
+                    + (n if self.estimate_x0 else 0))
+        # The largest Jacobian: the smallest hold-out and the shortest transient.
+        n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
+                                 validation_fraction=min(shares),
+                                 steady_state_period=self.period).fit_rows.sum())
+        n_rows = (n_samples * n_y + (n_samples if self.stability_penalty else 0)
+                  + (n_terms if self.weight_decay else 0))
+        concurrent = min(self.n_init, effective_n_jobs(self.n_jobs))
+        check_memory(
+            8 * n_rows * n_params * _JACOBIAN_COPIES * concurrent,
+            f"{type(self).__name__}({self._structure()}) has {n_params:,} parameters; "
+            f"its fit on {n_samples * n_y:,} cost values ({_JACOBIAN_COPIES} copies of "
+            f"the rows x parameters Jacobian, {concurrent} start(s) at a time)",
+            "Use a smaller model or a shorter record.")
+
+    def _underdetermined(self, problem):
+        """Whether the cost holds fewer values than the model has parameters
+        (with a warning): the search could then fit the data exactly whatever
+        the system, and its hold-out selection would rest on noise."""
+        model = problem.model
+        n_values = int(problem.fit_rows.sum()) * model.n_outputs
+        if n_values >= model.n_params:
+            return False
+        warnings.warn(
+            f"{type(self).__name__}({self._structure()}) has {model.n_params} parameters "
+            f"but its cost holds only {n_values} values (n_transient={self.n_transient}, "
+            f"validation_fraction={self.validation_fraction!r}): the nonlinear terms "
+            "cannot be identified and the linear model is kept (its nonlinear terms "
+            "are zero, its linear part refined on the simulation error). Use a longer "
+            "record or a smaller model.",
+            LinearFallbackWarning, stacklevel=5)
+        return True
+
     def _fit_normalized(self, U, Y, starts):
         self._check_periodic(starts)
         shares = self._validation_shares(starts)
+        self._check_model_size(U, Y, starts, shares)
         bla_rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
                             validation_fraction=max(shares), steady_state_period=self.period)
         A, B, C, D, x0 = self._linear_start(U, Y, starts,
@@ -214,7 +291,29 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         problem = problems[max(shares)]
         values = {name: np.zeros(shape) for name, shape in model.blocks}
         values.update(A=A, B=B, C=C, D=D, x0=x0)
-        theta = self._refined_linear_start(problem, model.pack(values))
+        theta = model.pack(values)
+        if self._underdetermined(problem):
+            theta_best, result = self._fit_linear_part(problem, theta)
+            self.start_losses_, self.fell_back_to_linear_ = np.zeros(0), True
+        else:
+            theta_best, result = self._search(problems, shares, theta, U, Y, starts)
+        values = model.unpack(theta_best)
+        self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
+        self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
+        self._set_terms(values)
+        # The structure the predictions simulate (the initial state is passed).
+        self._model = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs,
+                                      model.terms)
+        self.n_params_ = int(model.n_params)
+        self._set_search_result(result)
+
+    def _search(self, problems, shares, theta, U, Y, starts):
+        """The starts from the linear start ``theta``, each refined on the
+        problem of its hold-out share; the best on the common hold-out, unless
+        the linear start does better there."""
+        problem = problems[max(shares)]
+        model = problem.model
+        theta = self._refined_linear_start(problem, theta)
         seeds = check_random_state(self.random_state).randint(
             np.iinfo(np.int32).max, size=self.n_init)
         context = {"problem": problem, "model": model, "theta": theta, "U": U, "Y": Y,
@@ -230,7 +329,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         )
         failures = [outcome for outcome in outcomes if isinstance(outcome, Exception)]
         if len(failures) == len(outcomes):
-            raise failures[0]
+            raise self._unfittable(failures[0]) from failures[0]
         # Every start is judged on the end that all of them held out; a start
         # that blows up on a larger copy of the estimation input is out.
         common = problems[min(shares)]
@@ -247,18 +346,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                 f"{self._label}: no start beat the linear model on the held-out data "
                 f"(mean squared error {losses[best]:.3g} against {linear_loss:.3g}); "
                 "the linear model is kept (its nonlinear terms are zero).",
-                LinearFallbackWarning, stacklevel=3)
+                LinearFallbackWarning, stacklevel=5)
             theta_best = theta
         self._record_start(context, best, seeds[best])
-        values = model.unpack(theta_best)
-        self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
-        self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
-        self._set_terms(values)
-        # The structure the predictions simulate (the initial state is passed).
-        self._model = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs,
-                                      model.terms)
-        self.n_params_ = int(model.n_params)
-        self._set_search_result(result)
+        return theta_best, result
 
     # ------------------------------------------------------------ simulation
     def _fitted_model(self):

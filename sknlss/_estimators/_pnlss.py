@@ -7,13 +7,12 @@ on the simulation error, in the time domain or, for periodic data, in the
 frequency domain with noise weighting (paper eq. 17).
 """
 
-from numbers import Integral
-
 import numpy as np
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils._param_validation import StrOptions
 
-from .._terms._polynomial import STRUCTURES, PolynomialTerms, monomial_exponents
+from .._terms._polynomial import STRUCTURES, PolynomialTerms, monomial_exponents, n_monomials
+from .._validation import Integers, naming
 from ._nonlinear import _BaseNonlinearStateSpace
 
 # Size of the random polynomial coefficients of the starts after the first,
@@ -209,13 +208,14 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
 
     _parameter_constraints: dict = {
         **_BaseNonlinearStateSpace._parameter_constraints,
-        "degree": [Interval(Integral, 2, None, closed="left"), "array-like"],
+        "degree": [Integers(2, None, closed="left"), "array-like"],
         "state_terms": [StrOptions(set(STRUCTURES)), "array-like"],
         "output_terms": [StrOptions(set(STRUCTURES)), "array-like"],
         "center": ["boolean"],
     }
 
     _label = "PNLSS"
+    _structure_params = ("n_states", "degree", "state_terms", "output_terms")
 
     def __init__(
         self,
@@ -273,6 +273,16 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         self.output_exponents_ = monomial_exponents(n, n_inputs, self.degree,
                                                     self.output_terms)
         return PolynomialTerms(n, n_outputs, self.state_exponents_, self.output_exponents_)
+
+    def _n_terms_params(self, n_inputs, n_outputs):
+        n = self.n_states
+        counts = {}
+        for name in ("state_terms", "output_terms"):
+            structure = getattr(self, name)
+            # The degree matters only for the named structures (its errors name it).
+            with naming(name if not isinstance(structure, str) else "degree"):
+                counts[name] = n_monomials(n, n_inputs, self.degree, structure)
+        return n * counts["state_terms"] + n_outputs * counts["output_terms"]
 
     def _prepare_starts(self, context):
         problem, theta = context["problem"], context["theta"]

@@ -121,8 +121,9 @@ def robust_frf(U, Y, starts, period, *, n_transient=0, max_frequency=None):
         )
     if np.any(lengths != lengths[0]):
         raise ValueError(
-            "With `period` set, all sequences (realizations) must hold the same "
-            f"number of periods; got sequence lengths {sorted(set(lengths.tolist()))}."
+            "With `period` set, all sequences (realizations, see sequence_id) must hold "
+            f"the same number of periods; got sequence lengths "
+            f"{sorted(set(lengths.tolist()))}."
         )
     n_periods = int(lengths[0] // period)
     n_drop = -(-n_transient // period)
@@ -135,7 +136,7 @@ def robust_frf(U, Y, starts, period, *, n_transient=0, max_frequency=None):
     if n_real < n_u:
         raise ValueError(
             f"The robust method needs at least n_inputs={n_u} realizations "
-            f"(sequences) to separate the inputs; got {n_real}."
+            f"(sequences, see sequence_id) to separate the inputs; got {n_real}."
         )
     if period < 3:
         raise ValueError(f"period must be at least 3 samples, got {period}.")
@@ -150,7 +151,7 @@ def robust_frf(U, Y, starts, period, *, n_transient=0, max_frequency=None):
     keep = (bins > 0) & _band_mask(bins, period, max_frequency)
     keep &= power > EXCITATION_THRESHOLD * power[keep].max(initial=0.0)
     if not keep.any():
-        raise ValueError("The input has no power on any usable frequency line.")
+        raise ValueError("The input X has no power on any usable frequency line.")
     Uf, Yf = Uf[:, :, keep], Yf[:, :, keep]
 
     n_blocks = n_real // n_u
@@ -209,8 +210,8 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
                 return 2 * half + 1, degree
     if bandwidth is not None or n_bins < 1:
         raise ValueError(
-            f"The record is too short for the Local Polynomial Method: {n_bins} "
-            f"frequency bin(s) cannot hold a window of half-width {bandwidth} for "
+            f"The record (X, y) is too short for the Local Polynomial Method: {n_bins} "
+            f"frequency bin(s) cannot hold a window (lpm_bandwidth={bandwidth}) for "
             f"{n_inputs} input(s)."
         )
     return n_bins, 0
@@ -297,7 +298,7 @@ def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequen
     ]
     freqs = np.concatenate([p[0] for p in parts])
     if freqs.size == 0:
-        raise ValueError("The input has no power on any usable frequency bin.")
+        raise ValueError("The input X has no power on any usable frequency bin.")
     G = np.concatenate([p[1] for p in parts])
     if any(p[2] is None for p in parts):
         var = None

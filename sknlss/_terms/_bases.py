@@ -77,14 +77,18 @@ class _Basis:
     @property
     def degrees(self):
         """Degrees of the basis functions, as int64 (0 for the constant)."""
-        return self._with_constant(np.arange(1, self._checked_degree(1) + 1))
+        return np.array([0] * self._n_constant() + list(self._degree_range()), dtype=np.int64)
 
-    def _with_constant(self, degrees):
+    def _degree_range(self):
+        """The degrees but the constant, as a ``range``: counted without being listed."""
+        return range(1, self._checked_degree(1) + 1)
+
+    def _n_constant(self):
         if not isinstance(self.constant, (bool, np.bool_)):
             raise ValueError(
                 f"{type(self).__name__}: constant must be a bool, got {self.constant!r}."
             )
-        return np.concatenate([[0] if self.constant else [], degrees]).astype(np.int64)
+        return int(self.constant)
 
     def _checked_degree(self, lowest):
         degree = self.degree
@@ -99,7 +103,7 @@ class _Basis:
     @property
     def n_functions(self):
         """Number of basis functions."""
-        return len(self.degrees)
+        return len(self._degree_range()) + self._n_constant()
 
     def evaluate(self, z):
         """Values and derivatives of the basis functions.
@@ -172,20 +176,19 @@ class PolynomialBasis(_Basis):
         self.kind = kind
         self.constant = constant
 
-    @property
-    def degrees(self):
+    def _degree_range(self):
         top = self._checked_degree(2)
         if self.kind not in ("full", "odd", "even"):
             raise ValueError(
                 f"PolynomialBasis: kind must be 'full', 'odd' or 'even', got {self.kind!r}."
             )
         first, step = {"full": (2, 1), "odd": (3, 2), "even": (2, 2)}[self.kind]
-        degrees = np.arange(first, top + 1, step, dtype=np.int64)
-        if degrees.size == 0:
+        degrees = range(first, top + 1, step)
+        if not degrees:
             raise ValueError(
                 f"PolynomialBasis: kind='odd' needs degree >= 3, got {self.degree!r}."
             )
-        return self._with_constant(degrees)
+        return degrees
 
     def get_params(self, deep=True):
         """Constructor parameters, for display and comparison.

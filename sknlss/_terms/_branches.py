@@ -125,11 +125,16 @@ class BranchTerms(Terms):
         degrees = basis.degrees
         n_vars, n_fun = n_states + n_inputs, len(degrees)
         self.basis = basis
-        self.blocks = [("V", (n_vars, rank)), ("coefficients", (rank, n_fun)),
-                       ("W", (n_states + n_outputs, rank))]
+        self.blocks = self.layout(n_states, n_inputs, n_outputs, rank, n_fun)
         self.spec = np.concatenate([[rank, n_fun, basis.code], degrees]).astype(np.int64)
         self.work_size = 3 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
+
+    @staticmethod
+    def layout(n_states, n_inputs, n_outputs, rank, n_functions):
+        """The parameter blocks ``(name, shape)``, known before the terms are built."""
+        return [("V", (n_states + n_inputs, rank)), ("coefficients", (rank, n_functions)),
+                ("W", (n_states + n_outputs, rank))]
 
     def decay_mask(self):
         """The branch coefficients and the output directions W are decayed; the

@@ -23,15 +23,22 @@ is carried by ``A, B, C, D``.
 """
 
 import warnings
-from numbers import Integral
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import validate_params
 from tensorly.decomposition import parafac
 
+from .._core._memory import check_memory
 from .._core._optimize import levenberg_marquardt
-from ._polynomial import evaluate_monomials, monomial_jacobian
+from .._validation import Integers, naming
+from ._polynomial import (
+    MAX_DEGREE,
+    _validate_exponents,
+    evaluate_monomials,
+    monomial_jacobian,
+)
 
 # ALS for the CPD: iterations per restart and the stopping tolerance on the
 # change of the relative reconstruction error. ALS only provides starting
@@ -197,6 +204,21 @@ def _refinement_cost(tensor, values, points, W, V, coefficients):
     return cost
 
 
+@validate_params(
+    {
+        "coefficients": ["array-like"],
+        "exponents": ["array-like"],
+        "rank": [Integers(1, None, closed="left")],
+        "degree": [Integers(2, MAX_DEGREE, closed="both"), None],
+        "n_samples": [Integers(1, None, closed="left")],
+        "sampling_points": ["array-like", None],
+        "n_restarts": [Integers(1, None, closed="left")],
+        "refine": ["boolean"],
+        "zeroth_order": ["boolean"],
+        "random_state": ["random_state"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def decouple_polynomial(
     coefficients,
     exponents,
@@ -283,8 +305,16 @@ def decouple_polynomial(
     >>> print(f"{(W[0, 0] * c[0, 0] * (s @ V[:, 0]) ** 2):.6f}")
     9.000000
     """
-    coefficients = np.atleast_2d(np.asarray(coefficients, dtype=np.float64))
-    exponents = np.atleast_2d(np.asarray(exponents, dtype=np.int64))
+    with naming("coefficients"):
+        coefficients = np.atleast_2d(np.asarray(coefficients, dtype=np.float64))
+    with naming("exponents"):
+        exponents = np.atleast_2d(np.asarray(exponents, dtype=np.float64))
+        exponents = _validate_exponents(exponents, exponents.shape[-1])
+    if coefficients.ndim != 2:
+        raise ValueError(
+            f"coefficients must be a 2-D array (n_out, n_terms), got shape "
+            f"{coefficients.shape}."
+        )
     n_out, n_terms = coefficients.shape
     if exponents.shape[0] != n_terms:
         raise ValueError(
@@ -294,32 +324,31 @@ def decouple_polynomial(
     if not np.all(np.isfinite(coefficients)):
         raise ValueError("coefficients must be finite.")
     n_vars = exponents.shape[1]
-    total = exponents.sum(axis=1)
-    if n_terms and total.min() < 2:
-        raise ValueError("The monomials must have total degree >= 2.")
     if degree is None:
-        degree = int(total.max()) if n_terms else 2
-    if not isinstance(rank, Integral) or rank < 1:
-        raise ValueError(f"rank must be a positive integer, got {rank!r}.")
-    if not isinstance(degree, Integral) or degree < 2:
-        raise ValueError(f"degree must be an integer >= 2, got {degree!r}.")
-    if not isinstance(n_restarts, Integral) or n_restarts < 1:
-        raise ValueError(f"n_restarts must be a positive integer, got {n_restarts!r}.")
+        degree = int(exponents.sum(axis=1).max()) if n_terms else 2
     rng = check_random_state(random_state)
     if sampling_points is None:
-        points = rng.standard_normal((n_samples, n_vars))
+        n_points = n_samples
     else:
-        points = np.asarray(sampling_points, dtype=np.float64)
+        with naming("sampling_points"):
+            points = np.asarray(sampling_points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != n_vars or not np.all(np.isfinite(points)):
             raise ValueError(
                 f"sampling_points must be a finite array of shape (n_points, {n_vars}); "
                 f"got shape {points.shape}."
             )
-    if points.shape[0] < degree:
+        n_points = points.shape[0]
+    if n_points < degree:
         raise ValueError(
-            f"{points.shape[0]} sampling points cannot determine branches of degree "
-            f"{degree}; use at least {degree}."
+            f"{n_points} sampling points (n_samples or sampling_points) cannot "
+            f"determine branches of degree {degree}; use at least {degree}."
         )
+    # The monomials' Jacobians and the tensor stacked from them.
+    check_memory(8 * n_points * n_vars * (n_terms + 2 * n_out),
+                 f"The Jacobian tensor of {n_terms} monomials in {n_points} sampling points "
+                 "(n_samples or sampling_points)")
+    if sampling_points is None:
+        points = rng.standard_normal((n_points, n_vars))
     n_coef = degree - 1
     tensor = _jacobian_tensor(coefficients, exponents, points)
     if not np.all(np.isfinite(tensor)):

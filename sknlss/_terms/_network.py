@@ -146,14 +146,21 @@ class NetworkTerms(Terms):
 
     def __init__(self, n_states, n_inputs, n_outputs, n_neurons, activation):
         n_vars = n_states + n_inputs
-        self.blocks = []
-        for part, n_components in (("f", n_states), ("g", n_outputs)):
-            n_hidden = n_components * n_neurons
-            self.blocks += [(f"{part}_W", (n_hidden, n_vars)), (f"{part}_b", (n_hidden,)),
-                            (f"{part}_v", (n_hidden,)), (f"{part}_c", (n_components,))]
+        self.blocks = self.layout(n_states, n_inputs, n_outputs, n_neurons)
         self.spec = np.array([n_neurons, ACTIVATIONS[activation]], dtype=np.int64)
         self.work_size = 2 * (n_states + n_outputs) * n_neurons
         self.n_state_params = n_states * n_neurons * (n_vars + 2) + n_states
+
+    @staticmethod
+    def layout(n_states, n_inputs, n_outputs, n_neurons):
+        """The parameter blocks ``(name, shape)``, known before the terms are built."""
+        n_vars = n_states + n_inputs
+        blocks = []
+        for part, n_components in (("f", n_states), ("g", n_outputs)):
+            n_hidden = n_components * n_neurons
+            blocks += [(f"{part}_W", (n_hidden, n_vars)), (f"{part}_b", (n_hidden,)),
+                       (f"{part}_v", (n_hidden,)), (f"{part}_c", (n_components,))]
+        return blocks
 
     def decay_mask(self):
         """The weights W and v are decayed, the biases are not."""

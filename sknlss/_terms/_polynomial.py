@@ -13,6 +13,7 @@ simulation kernels and for the batch functions :func:`evaluate_monomials` and
 """
 
 from itertools import combinations_with_replacement
+from math import comb
 from numbers import Integral
 
 import numpy as np
@@ -23,6 +24,11 @@ from .._core._model import Terms
 
 #: Monomial selections understood by :func:`monomial_exponents`.
 STRUCTURES = ("full", "states_only", "no_cross_products", "inputs_only")
+#: Largest total degree of a monomial: a higher power overflows double
+#: precision as soon as its variable reaches 2 in magnitude (2**1024 is beyond
+#: the largest float), which normalised signals do; the compiled evaluation
+#: also tabulates every power up to it.
+MAX_DEGREE = 1023
 
 
 def _as_degrees(degree):
@@ -43,37 +49,64 @@ def _as_degrees(degree):
                 f"degree must be an int or a non-empty iterable of ints, got {degree!r}."
             )
         degrees = [int(d) for d in degrees]
-    if min(degrees) < 2:
+    if min(degrees) < 2 or max(degrees) > MAX_DEGREE:
         raise ValueError(
-            f"Polynomial degrees must be >= 2 (the linear part is A, B, C, D), "
-            f"got {degree!r}."
+            f"Polynomial degrees must be >= 2 (the linear part is A, B, C, D) and at "
+            f"most {MAX_DEGREE}, got degree={degree!r}."
         )
     return sorted(set(degrees))
 
 
 def _validate_exponents(exponents, n_vars):
     """Check an explicit exponent array and return it as int64."""
-    arr = np.asarray(exponents)
+    arr = np.asarray(exponents, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != n_vars:
         raise ValueError(
             f"An explicit exponent array must have shape (n_terms, {n_vars}) "
             f"(n_states + n_inputs columns), got shape {arr.shape}."
         )
-    if arr.size and not np.all(np.isfinite(arr.astype(float))):
-        raise ValueError("The exponent array must be finite.")
-    if arr.size and not np.all(arr == np.round(arr)):
-        raise ValueError("The exponent array must hold integers.")
-    arr = arr.astype(np.int64)
-    if np.any(arr < 0):
+    if not np.all(np.isfinite(arr)) or not np.all(arr == np.round(arr)) or np.any(arr < 0):
         raise ValueError("The exponent array must hold non-negative integers.")
-    if np.any(arr.sum(axis=1) < 2):
+    total = arr.sum(axis=1)
+    if np.any(total < 2) or np.any(total > MAX_DEGREE):
         raise ValueError(
             "Every monomial must have total degree >= 2 (the linear part is "
-            "A, B, C, D)."
+            f"A, B, C, D) and at most {MAX_DEGREE}."
         )
+    arr = arr.astype(np.int64)
     if len(np.unique(arr, axis=0)) != len(arr):
         raise ValueError("The exponent array has duplicate rows.")
     return np.ascontiguousarray(arr)
+
+
+def n_monomials(n_states, n_inputs, degree, structure="full"):
+    """Number of rows of :func:`monomial_exponents`, counted without listing them.
+
+    A model's size is checked against the data and the memory before its
+    monomials are listed: with many states there can be billions of them.
+
+    Parameters
+    ----------
+    n_states, n_inputs, degree, structure
+        As in :func:`monomial_exponents`.
+
+    Returns
+    -------
+    count : int
+    """
+    n_vars = int(n_states) + int(n_inputs)
+    if not isinstance(structure, str):
+        return len(_validate_exponents(structure, n_vars))
+    if structure not in STRUCTURES:
+        raise ValueError(
+            f"structure must be one of {STRUCTURES} or an exponent array, "
+            f"got {structure!r}."
+        )
+    if structure == "no_cross_products":
+        return n_vars * len(_as_degrees(degree))
+    # Monomials of total degree d in k variables: multisets of size d.
+    k = {"full": n_vars, "states_only": int(n_states), "inputs_only": int(n_inputs)}[structure]
+    return sum(comb(k + d - 1, d) for d in _as_degrees(degree)) if k else 0
 
 
 def monomial_exponents(n_states, n_inputs, degree, structure="full"):

@@ -1,7 +1,7 @@
 """The Cascaded Tanks benchmark: loader of the measured data and a simulator."""
 
 import os
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
 from numba import njit
@@ -9,6 +9,7 @@ from scipy.io import loadmat
 from sklearn.utils import Bunch, check_random_state
 from sklearn.utils._param_validation import Interval, validate_params
 
+from .._validation import Integers, naming
 from ..signals import multisine
 from ._fetch import RemoteDataset, fetch_file
 
@@ -269,13 +270,17 @@ def _simulate_tanks(u, x0, k, sampling_time, n_substeps, overflow, process, spli
     return states
 
 
+#: Upper edge of the band of the benchmark's input, in Hz.
+_INPUT_BAND = 0.0144
+
+
 def _benchmark_like_input(n_samples, sampling_time, rng):
     """Low-pass multisine like the benchmark's: 0 to 0.0144 Hz, 2.8 V mean, 1 V RMS.
 
     As in the measured input, the lowest third of the band has ten times the
     amplitude of the rest. A pump voltage cannot be negative.
     """
-    f_max = 0.0144 * sampling_time
+    f_max = _INPUT_BAND * sampling_time
     u, _ = multisine(
         n_samples, lines="full", band=(0.0, min(f_max, 0.5)),
         amplitudes=lambda f: np.where(f <= f_max / 3, 1.0, 0.1),
@@ -286,7 +291,7 @@ def _benchmark_like_input(n_samples, sampling_time, rng):
 
 @validate_params(
     {
-        "n_samples": [Interval(Integral, 3, None, closed="left")],
+        "n_samples": [Integers(3, None, closed="left")],
         "input": ["array-like", None],
         "sampling_time": [Interval(Real, 0, np.inf, closed="neither")],
         "process_noise": [Interval(Real, 0, np.inf, closed="left")],
@@ -295,7 +300,7 @@ def _benchmark_like_input(n_samples, sampling_time, rng):
         "overflow_fraction": [Interval(Real, 0, 1, closed="both")],
         "k": ["array-like"],
         "x0": ["array-like", None],
-        "n_substeps": [Interval(Integral, 1, None, closed="left")],
+        "n_substeps": [Integers(1, None, closed="left")],
         "random_state": ["random_state"],
     },
     prefer_skip_nested_validation=True,
@@ -390,21 +395,33 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
     >>> bool(data.y_est.max() <= 10.1)
     True
     """
-    overflow = np.asarray(overflow, dtype=np.float64)
-    constants = np.asarray(k, dtype=np.float64)
+    with naming("overflow"):
+        overflow = np.asarray(overflow, dtype=np.float64)
+    with naming("k"):
+        constants = np.asarray(k, dtype=np.float64)
     if overflow.shape != (2,) or np.any(overflow <= 0) or np.any(np.isnan(overflow)):
         raise ValueError(f"overflow must be two positive levels, got {overflow!r}.")
     if constants.shape != (4,) or not np.all(np.isfinite(constants)) or np.any(constants <= 0):
         raise ValueError(f"k must be four positive finite constants, got {k!r}.")
-    x0 = np.array([5.0, 5.0]) if x0 is None else np.asarray(x0, dtype=np.float64)
+    with naming("x0"):
+        x0 = np.array([5.0, 5.0]) if x0 is None else np.asarray(x0, dtype=np.float64)
     if x0.shape != (2,) or not np.all(np.isfinite(x0)) or np.any(x0 < 0):
         raise ValueError(f"x0 must hold two non-negative finite levels, got {x0!r}.")
 
     rng = check_random_state(random_state)
     if input is None:
+        # The lowest frequency of the record, 1 / (n_samples * sampling_time),
+        # must lie in the input band.
+        if min(_INPUT_BAND * sampling_time, 0.5) * n_samples < 1:
+            raise ValueError(
+                f"n_samples={n_samples} samples at sampling_time={sampling_time} s are too "
+                f"short a record for the benchmark's input band (0 to {_INPUT_BAND} Hz): "
+                f"it needs at least {1 / _INPUT_BAND:.0f} s, or an explicit input."
+            )
         inputs = [_benchmark_like_input(n_samples, sampling_time, rng) for _ in range(2)]
     else:
-        inputs = [np.asarray(u, dtype=np.float64) for u in input]
+        with naming("input"):
+            inputs = [np.asarray(u, dtype=np.float64) for u in input]
         if len(inputs) != 2 or any(u.shape != (n_samples,) for u in inputs):
             raise ValueError(
                 f"input must be a pair (u_est, u_test) of 1-D arrays of length "

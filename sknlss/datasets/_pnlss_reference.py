@@ -1,13 +1,13 @@
 """Data from the reference PNLSS system of the PNLSS 1.0 toolbox tutorial (VUB ELEC)."""
 
-from numbers import Integral
 
 import numpy as np
 from sklearn.utils import Bunch, check_random_state
-from sklearn.utils._param_validation import Interval, validate_params
+from sklearn.utils._param_validation import validate_params
 
 from .._core._model import StateSpaceModel
 from .._terms._polynomial import PolynomialTerms, monomial_exponents
+from .._validation import Integers
 from ..signals import multisine
 
 # The true system: 2 states, 1 input, 1 output; E and F weigh the 16 monomials
@@ -59,9 +59,9 @@ a correct PNLSS model about 1e-4 to 3e-4.
 
 @validate_params(
     {
-        "n_realizations": [Interval(Integral, 1, None, closed="left")],
-        "n_periods": [Interval(Integral, 1, None, closed="left")],
-        "n_samples_per_period": [Interval(Integral, 8, None, closed="left")],
+        "n_realizations": [Integers(1, None, closed="left")],
+        "n_periods": [Integers(1, None, closed="left")],
+        "n_samples_per_period": [Integers(8, None, closed="left")],
         "noise": ["boolean"],
         "random_state": ["random_state"],
     },

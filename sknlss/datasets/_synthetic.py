@@ -1,10 +1,11 @@
 """Pieces shared by the simulated systems: inputs, envelopes, noise, band checks."""
 
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
 from sklearn.utils._param_validation import Interval
 
+from .._validation import Integers
 from ..signals import multisine
 
 #: Samples at the start of every simulated test record that may be used to
@@ -17,14 +18,14 @@ PRE_ROLL = 256
 
 #: Parameter constraints common to the generators.
 RECORD_CONSTRAINTS = {
-    "n_samples": [Interval(Integral, 128, None, closed="left")],
-    "n_test_samples": [Interval(Integral, 128, None, closed="left")],
+    "n_samples": [Integers(128, None, closed="left")],
+    "n_test_samples": [Integers(128, None, closed="left")],
     "noise_std": [Interval(Real, 0, np.inf, closed="left")],
     "sampling_time": [Interval(Real, 0, np.inf, closed="neither")],
     "random_state": ["random_state"],
 }
 POSITIVE = Interval(Real, 0, np.inf, closed="neither")
-AT_LEAST_ONE = Interval(Integral, 1, None, closed="left")
+AT_LEAST_ONE = Integers(1, None, closed="left")
 
 
 def band_fraction(band_hz, sampling_time):
