@@ -22,6 +22,7 @@ import sys
 import time
 import warnings
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -142,7 +143,9 @@ def load_benchmark(name, data_home=None, *, download_if_missing=True, out=None):
     data : Bunch
         The records, as the dataset loader returns them.
     source : str
-        ``"measured (<file>)"`` or ``"simulated (...)"``.
+        ``"measured (<file name>)"`` or ``"simulated"``. Only the file's name:
+        the text goes into printed tables and logs, where a path of the
+        machine says nothing to the reader.
     """
     benchmark = BENCHMARKS[name]
     out = sys.stdout if out is None else out
@@ -153,7 +156,7 @@ def load_benchmark(name, data_home=None, *, download_if_missing=True, out=None):
         print(f"FALLING BACK TO SIMULATED DATA for {benchmark.title}: the numbers below "
               "are NOT the benchmark's results.\n", file=out)
         return benchmark.simulate(), "simulated"
-    return data, f"measured ({data.filename})"
+    return data, f"measured ({Path(data.filename).name})"
 
 
 def _fit_and_score(factory, seed, data, records, scale):
