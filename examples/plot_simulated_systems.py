@@ -5,8 +5,8 @@ A tour of the simulated systems
 Four simulated systems of :mod:`sknlss.datasets` need no data files and each
 probes something the measured benchmarks do not isolate. Every record starts
 mid-motion (the system has been running before the first sample), and every
-test input leaves the estimation amplitude over its last quarter, so the
-models must extrapolate:
+test input ends beyond the estimation amplitude, so the models must
+extrapolate:
 
 * :func:`~sknlss.datasets.make_wiener_hammerstein` -- a filter, a soft
   saturation (``tanh``) and a filter: a static nonlinearity between two
