@@ -59,10 +59,10 @@ print("(paper: PNLSS-I 0.450 V on the test record with 132 parameters)")
 # held-out end reaches a minimum early: with 1024 samples and more than 130
 # parameters the model overfits quickly, so the selection of the iterate
 # matters as much as that of the start.
+print("Held-out mean squared error of the starts (normalised units):")
 for name, model in models.items():
     losses = ", ".join(f"{loss:.3g}" for loss in model.start_losses_)
-    print(f"{name}: held-out mean squared error of the starts "
-          f"(normalised units): {losses}")
+    print(f"  {name}: {losses}")
 
 fig, ax = plt.subplots(figsize=(8, 4), layout="constrained")
 for k, (name, model) in enumerate(models.items()):
