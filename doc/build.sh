@@ -9,7 +9,8 @@
 #
 # SKNLSS_DOCS_EXAMPLES=fast|all|none chooses which gallery examples run
 # (default all; see doc/conf.py). Set SKNLSS_DATA to the folder holding
-# cascaded_tanks/ for the examples to use the measured benchmark data.
+# cascaded_tanks/ and silverbox/ for the examples to use the measured
+# benchmark data.
 set -eu
 cd "$(dirname "$0")/.."
 out="${1:-doc/_build/html}"

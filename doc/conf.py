@@ -5,15 +5,17 @@ Build with ``sh doc/build.sh [OUTDIR]``, which runs ``sphinx-build -W
 ``doc/check_html.py``. Neither the build nor the pages need a network:
 intersphinx is not used, MathJax is copied into ``_static/mathjax`` (package
 ``sphinx-mathjax-offline``), the theme ships its own scripts and fonts, and
-the real Cascaded Tanks data are read from ``$SKNLSS_DATA`` when set (the
-examples fall back to the simulated tanks otherwise).
+the measured Cascaded Tanks and Silverbox data are read from
+``$SKNLSS_DATA`` when set (the examples fall back to simulated stand-ins
+otherwise, through :func:`sknlss.benchmarks.load_benchmark`).
 
 The examples gallery runs the example scripts. Which ones run is chosen by the
 environment variable ``SKNLSS_DOCS_EXAMPLES``:
 
 ``all`` (default)
-    run every example (about a minute in total on two cores once numba's
-    cache is warm; each example takes at most about a minute);
+    run every example (a few minutes in total on two cores once numba's
+    cache is warm; the longest, the Silverbox and the paper's tables, take
+    a minute or more each);
 ``fast``
     run only the quickest examples; the others are rendered with their code
     and text but without output;

@@ -1,6 +1,6 @@
 """
-Choosing hyperparameters with GridSearchCV
-==========================================
+Choosing the model structure: GridSearchCV and HoldoutSearch
+============================================================
 
 The hyperparameters of the sknlss estimators are ordinary constructor
 arguments, so scikit-learn's model selection tools apply, with two cautions
@@ -12,13 +12,16 @@ for dynamical models:
   true state at its first sample, so the score must skip a transient
   (:func:`sknlss.metrics.make_transient_scorer`).
 
-This example tunes NLSS2 and PNLSS models on the single Cascaded Tanks
-estimation record with ``TimeSeriesSplit``; the test record is used only once,
-for each chosen model. For several records (realizations) labelled by
-``sequence_id``, see
-:ref:`sphx_glr_auto_examples_plot_grid_search_realizations.py`, which routes
-the labels with scikit-learn's metadata routing and leaves one realization
-out per fold.
+This example tunes an NLSS2 model on the single Cascaded Tanks estimation
+record with ``GridSearchCV`` and ``TimeSeriesSplit``, then the static
+nonlinearity of an NL-LFR model with
+:class:`~sknlss.model_selection.HoldoutSearch`, which judges every candidate
+on the end of the record, simulated on from the part it was fitted on. The
+test record is used only once, for each chosen model. Every candidate is a
+small fit (one start instead of several) so that the searches run in well
+under a minute: they compare structures, not the best each structure can
+do. For several records (realizations) labelled by ``sequence_id``, see
+:ref:`sphx_glr_auto_examples_plot_grid_search_realizations.py`.
 """
 
 # %%
@@ -30,27 +33,30 @@ import matplotlib.pyplot as plt
 import numpy as np
 from sklearn.model_selection import GridSearchCV, TimeSeriesSplit
 
-from sknlss import NLSS2Regressor, PNLSSRegressor
-from sknlss.datasets import load_cascaded_tanks, make_cascaded_tanks
+from sknlss import (ChebyshevBasis, LegendreBasis, NLLFRRegressor, NLSS2Regressor,
+                    PolynomialBasis)
+from sknlss.benchmarks import load_benchmark
 from sknlss.metrics import make_transient_scorer, rms_error
+from sknlss.model_selection import HoldoutSearch
 
-try:
-    data = load_cascaded_tanks()
-    print(f"Measured Cascaded Tanks data from {data.filename}")
-except FileNotFoundError as exc:
-    print(f"{exc}\nTHE REAL DATA ARE ABSENT: using simulated tanks (make_cascaded_tanks).")
-    data = make_cascaded_tanks(random_state=0)
+data, source = load_benchmark("cascaded_tanks")
+print(f"Cascaded Tanks, data: {source}")
 
 # %%
 # Time-ordered folds
 # ------------------
 # Three folds whose validation blocks are the last 600 samples of the
 # estimation record, 200 at a time, each model fitted on everything before
-# its block. Within each fit, the last 30% of the training part selects the
-# Levenberg-Marquardt iterate. The score is the RMS error after the first 100
-# samples of the validation block (the state needs that long to settle).
+# its block (within each fit, a held-out end of that part selects the
+# Levenberg-Marquardt iterate). The score is the RMS error after the first
+# 100 samples of the validation block: the state needs that long to settle.
 cv = TimeSeriesSplit(n_splits=3, test_size=200)
 scoring = make_transient_scorer("rms", n_transient=100)
+
+
+def show(rms):
+    """An RMS error in volts; a simulation that diverges has none."""
+    return f"{rms:.4f} V" if np.isfinite(rms) else "diverged"
 
 
 def run_search(estimator, param_grid):
@@ -63,12 +69,11 @@ def run_search(estimator, param_grid):
     for params, score in zip(search.cv_results_["params"],
                              search.cv_results_["mean_test_score"]):
         # A simulation that diverges on a validation block scores -inf.
-        shown = f"{-score:.4f} V" if np.isfinite(score) else "diverged"
-        print(f"  {params}: validation RMS {shown}")
+        print(f"  {params}: validation RMS {show(-score)}")
     # The best candidate, refitted on the whole estimation record, is
     # evaluated on the test record; nothing was chosen with it.
     rms_test = rms_error(data.y_test, search.predict(data.X_test))
-    print(f"Chosen: {search.best_params_}; test RMS {rms_test:.4f} V")
+    print(f"Chosen: {search.best_params_}; test RMS {show(rms_test)}")
     return search
 
 
@@ -76,8 +81,7 @@ def run_search(estimator, param_grid):
 # NLSS2: the state-estimation weight ``alpha`` and the number of neurons, with
 # the initial state estimated (third order, as in the paper).
 nlss2_search = run_search(
-    NLSS2Regressor(n_states=3, estimate_x0=True, validation_fraction=0.3, max_iter=50,
-                   random_state=0),
+    NLSS2Regressor(n_states=3, estimate_x0=True, n_init=1, random_state=0),
     {"alpha": [1.0, 10.0, 100.0], "n_neurons": [1, 2]},
 )
 
@@ -100,8 +104,35 @@ for (i, j), value in np.ndenumerate(scores):
 fig.colorbar(image, ax=ax, label="validation RMS (V)")
 
 # %%
-# PNLSS: the model order and the polynomial degrees.
-pnlss_search = run_search(
-    PNLSSRegressor(validation_fraction=0.3, max_iter=30),
-    {"n_states": [2, 3], "degree": [2, 3, (2, 3)]},
+# Held-out ends: HoldoutSearch
+# ----------------------------
+# A validation fold of ``TimeSeriesSplit`` starts from the model's own initial
+# state, not from the state the record is in at that point. With an initial
+# state estimated at the start of the record, the natural check is the end
+# of the record itself, simulated on from the fitted part.
+# :class:`~sknlss.model_selection.HoldoutSearch` fits every setting at several
+# held-out shares and ranks all fits on the end that every one of them held
+# out. Here it chooses the static nonlinearity of a third-order NL-LFR model:
+# one or two branches, each a cubic polynomial (powers 2 and 3) or a
+# combination of the Legendre or Chebyshev polynomials of degrees 1 to 3 of
+# ``tanh(z)``.
+bases = {"powers": PolynomialBasis(3), "Legendre": LegendreBasis(3),
+         "Chebyshev": ChebyshevBasis(3)}
+search = HoldoutSearch(
+    NLLFRRegressor(n_states=3, estimate_x0=True, n_init=1, random_state=0),
+    validation_fractions=(0.25, 0.3, 0.35),
+    param_grid={"basis": list(bases.values()), "n_branches": [1, 2]},
 )
+start = time.perf_counter()
+search.fit(data.X_est, data.y_est)
+print(f"HoldoutSearch on the estimation record in {time.perf_counter() - start:.1f} s; "
+      f"ranked on its last {search.holdout_fraction_:.0%}")
+names = {basis: name for name, basis in bases.items()}
+for params, rms in zip(search.results_["params"], search.results_["holdout_rms"]):
+    print(f"  {names[params['basis']]:9s} {params['n_branches']} branch(es), held out "
+          f"{params['validation_fraction']:.2f}: RMS {show(rms)}")
+best = search.best_params_
+rms_test = rms_error(data.y_test, search.predict(data.X_test))
+print(f"Chosen: {names[best['basis']]}, {best['n_branches']} branch(es), held out "
+      f"{best['validation_fraction']:.2f}; test RMS {show(rms_test)}")
+plt.show()

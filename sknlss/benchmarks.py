@@ -161,7 +161,9 @@ def load_benchmark(name, data_home=None, *, download_if_missing=True, out=None):
     data : Bunch
         The records, as the dataset loader returns them.
     source : str
-        ``"measured (<file name>)"`` or ``"simulated"``.
+        ``"measured (<file name>)"`` or ``"simulated"``. Only the file's name:
+        the text goes into printed tables and logs, where a path of the
+        machine says nothing to the reader.
     """
     benchmark = _benchmark(name, "name")
     out = sys.stdout if out is None else out
@@ -305,8 +307,9 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
         data, source = load_benchmark(name, data_home, download_if_missing=download_if_missing,
                                       out=out)
         records = benchmark.records(data)
-        print(f"{benchmark.title}, data: {source}; fitted on the estimation record only, "
-              f"random states {list(random_states)}.", file=out, flush=True)
+        # Two lines: the header stays readable in an 88-column terminal.
+        print(f"{benchmark.title}, data: {source}.\nFitted on the estimation record "
+              f"only, random states {list(random_states)}.", file=out, flush=True)
         rows, fitted = evaluate(data, benchmark.models(), records,
                                 random_states=random_states, scale=benchmark.scale, out=out)
         print("\n" + format_table(rows, records, benchmark.unit) + "\n", file=out, flush=True)

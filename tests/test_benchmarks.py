@@ -60,6 +60,15 @@ def test_missing_data_fall_back_to_simulated(monkeypatch):
     assert data.X_est.shape[1] == 1
 
 
+def test_measured_source_names_the_file_only(monkeypatch):
+    data = make_cascaded_tanks(n_samples=256, random_state=0)
+    data.filename = "/some/folder/cascaded_tanks/dataBenchmark.mat"
+    benchmark = _tiny_benchmark()
+    benchmark.fetch = lambda home, download_if_missing: data
+    monkeypatch.setitem(BENCHMARKS, "tiny", benchmark)
+    assert benchmarks.load_benchmark("tiny")[1] == "measured (dataBenchmark.mat)"
+
+
 def test_command_line(monkeypatch):
     calls = []
     monkeypatch.setattr("sknlss.__main__.reproduce",

@@ -206,7 +206,7 @@ class PolynomialBasis(_Basis):
 
 
 class LegendreBasis(_Basis):
-    """Legendre polynomials ``P_1 .. P_degree`` of ``tanh(z)``, and a constant.
+    """Legendre polynomials of degrees 1 to ``degree`` of ``tanh(z)``, and a constant.
 
     The squashing keeps every branch bounded, so the model cannot be driven
     to infinity by its nonlinearity when the input leaves the estimation
@@ -224,7 +224,7 @@ class LegendreBasis(_Basis):
 
 
 class ChebyshevBasis(_Basis):
-    """Chebyshev polynomials ``T_1 .. T_degree`` of ``tanh(z)``, and a constant.
+    """Chebyshev polynomials of degrees 1 to ``degree`` of ``tanh(z)``, and a constant.
 
     Bounded like :class:`LegendreBasis`; the Chebyshev polynomials weight the
     ends of the range more.
