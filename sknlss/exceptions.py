@@ -17,11 +17,13 @@ class SimulationDivergedWarning(RuntimeWarning):
 
 
 class LinearFallbackWarning(UserWarning):
-    """Warning raised when a nonlinear model does not beat its linear start.
+    """Warning raised when a record cannot identify the nonlinear terms.
 
-    No start of the nonlinear optimisation simulated the held-out data better
-    than the linear model it started from, or the cost holds fewer values than
-    the model has parameters (no start is then tried); the estimator keeps
-    that linear model (its nonlinear terms are zero) and sets
-    ``fell_back_to_linear_``.
+    The cost of the fit holds fewer values than the model has parameters: the
+    estimator keeps its linear model (the nonlinear terms are zero, the linear
+    part is refined on the simulation error) and sets
+    ``fell_back_to_linear_``. A nonlinear model that the record can identify
+    but that does not beat its linear start on the held-out data is not
+    returned either; that is recorded in ``fell_back_to_linear_`` without a
+    warning, as a result of the selection.
     """

@@ -25,9 +25,9 @@ _DAMPING_DOWN = 0.5
 # search has stalled: no direction decreases the cost.
 _MAX_REJECTED = 14
 # The iteration limit is worth a warning only when the last tenth of the
-# iterations still improved the loss that selects the iterate by 0.1 %.
+# iterations still improved the loss that selects the iterate by 1 %.
 _RECENT_SHARE = 0.1
-_RECENT_GAIN = 1e-3
+_RECENT_GAIN = 1e-2
 
 
 @dataclass

@@ -27,7 +27,7 @@ _SHRINK_FACTORS = (1.0, 0.5, 0.25, 0.1, 0.01, 0.0)
 
 # The PNLSS settings that the decoupled model passes on to its PNLSS model.
 _FORWARDED = ("n_states", "estimate_x0", "period", "cost", "validation_fraction",
-              "n_transient")
+              "n_transient", "random_state")
 
 
 def _stack_polynomials(E, state_exponents, F, output_exponents):
@@ -114,7 +114,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
         ``n_states``, ``estimate_x0``, ``period``, ``cost``,
-        ``validation_fraction`` and ``n_transient`` from this estimator, and
+        ``validation_fraction``, ``n_transient`` and ``random_state`` from this
+        estimator, and
         its normalisation of the signals (``center``) is used by the decoupled
         model too. Its own hyperparameters are tunable as ``pnlss__degree``
         and so on. ``None`` uses ``PNLSSRegressor()``.
@@ -220,9 +221,12 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         sequences that all starts held out (``inf`` for a start that failed or
         that ran away on the enlarged estimation input).
     fell_back_to_linear_ : bool
-        True when no start beat the linear model there: the linear model is
-        kept (its nonlinear terms are zero) and a
-        :class:`~sknlss.LinearFallbackWarning` is issued.
+        True when no start beat the linear model there, or the record is too
+        short for the nonlinear terms (with a
+        :class:`~sknlss.LinearFallbackWarning`): the linear model is kept (its
+        nonlinear terms are zero).
+    linear_loss_ : float
+        Mean squared simulation error of the linear start on that end.
     fit_transient_ : int
         Samples per sequence left out of the cost (see ``n_transient``).
     n_features_in_ : int
@@ -368,7 +372,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     def _make_terms(self, n_inputs, n_outputs):
         self.branch_degree_ = self._branch_degree()
         return BranchTerms(self.n_states, n_inputs, n_outputs, self.rank,
-                           PolynomialBasis(self.branch_degree_, constant=False))
+                           PolynomialBasis(self.branch_degree_))
 
     def _n_terms_params(self, n_inputs, n_outputs):
         n_functions = PolynomialBasis(self._branch_degree()).n_functions

@@ -226,9 +226,12 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         sequences that all starts held out (``inf`` for a start that failed or
         that ran away on the enlarged estimation input).
     fell_back_to_linear_ : bool
-        True when no start beat the linear model there: the linear model is
-        kept (its nonlinear terms are zero) and a
-        :class:`~sknlss.LinearFallbackWarning` is issued.
+        True when no start beat the linear model there, or the record is too
+        short for the nonlinear terms (with a
+        :class:`~sknlss.LinearFallbackWarning`): the linear model is kept (its
+        nonlinear terms are zero).
+    linear_loss_ : float
+        Mean squared simulation error of the linear start on that end.
     fit_transient_ : int
         Samples per sequence left out of the cost (see ``n_transient``).
     n_features_in_ : int

@@ -340,13 +340,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         theta_best, result = outcomes[best]
         self.start_losses_ = np.asarray(losses)
         linear_loss = holdout_loss(common, theta)
+        # A nonlinear model that does worse than its linear start there is not
+        # returned: the linear model is, and the attribute records it.
+        self.linear_loss_ = linear_loss
         self.fell_back_to_linear_ = not losses[best] < linear_loss
         if self.fell_back_to_linear_:
-            warnings.warn(
-                f"{self._label}: no start beat the linear model on the held-out data "
-                f"(mean squared error {losses[best]:.3g} against {linear_loss:.3g}); "
-                "the linear model is kept (its nonlinear terms are zero).",
-                LinearFallbackWarning, stacklevel=5)
+            if self.verbose:
+                print(f"{self._label}: no start beat the linear model on the held-out "
+                      f"data ({losses[best]:.3g} against {linear_loss:.3g}); the linear "
+                      "model is kept.")
             theta_best = theta
         self._record_start(context, best, seeds[best])
         return theta_best, result

@@ -96,8 +96,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         Settings of the linear model used for the initialisation; it is given
         this model's ``n_states``, ``estimate_x0`` and (if its own is None)
         ``period``. ``None`` uses :class:`~sknlss.BLAEstimator`'s defaults.
-    max_iter : int, default=100
-        Maximum number of Levenberg-Marquardt iterations.
+    max_iter : int, default=200
+        Maximum number of Levenberg-Marquardt iterations of each start.
     tol : float, default=1e-9
         Relative cost decrease below which the iterations stop.
     validation_fraction : float or "auto", default="auto"
@@ -118,8 +118,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         others from small random polynomial terms around it; the start with
         the lowest simulation error on the held-out end (training cost
         without hold-out) is kept, unless the linear model does better there:
-        it is then kept instead (``fell_back_to_linear_``, with a
-        :class:`~sknlss.LinearFallbackWarning`).
+        it is then kept instead (``fell_back_to_linear_``).
     n_jobs : int, default=None
         Number of joblib workers for the starts.
     random_state : int, RandomState instance or None, default=None
@@ -168,9 +167,12 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         sequences that all starts held out (``inf`` for a start that failed or
         that ran away on the enlarged estimation input).
     fell_back_to_linear_ : bool
-        True when no start beat the linear model there: the linear model is
-        kept (its nonlinear terms are zero) and a
-        :class:`~sknlss.LinearFallbackWarning` is issued.
+        True when no start beat the linear model there, or the record is too
+        short for the nonlinear terms (with a
+        :class:`~sknlss.LinearFallbackWarning`): the linear model is kept (its
+        nonlinear terms are zero).
+    linear_loss_ : float
+        Mean squared simulation error of the linear start on that end.
     fit_transient_ : int
         Samples per sequence left out of the cost (see ``n_transient``).
     bla_ : BLAEstimator
@@ -232,7 +234,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         stability_penalty=1.0,
         weight_decay=10.0,
         bla=None,
-        max_iter=100,
+        max_iter=200,
         tol=1e-9,
         validation_fraction="auto",
         n_iter_no_change=None,
@@ -291,14 +293,20 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
             context["monomial_rms"] = problem.model.parameter_rms(theta, points)
 
     def _starting_points(self, context, start, seed):
-        theta = context["theta"].copy()
-        if start > 0:
-            # Later starts: small random polynomial terms around the linear model.
-            columns = context["model"].terms_columns
-            rms = np.maximum(context["monomial_rms"], np.finfo(float).tiny)
-            noise = check_random_state(seed).standard_normal(columns.size)
-            theta[columns] = _START_SCALE * noise / rms
-        return [theta]
+        theta = context["theta"]
+        if start == 0:
+            return [theta]
+        # Later starts: small random polynomial terms around the linear model,
+        # smaller still, then none, if the model cannot be simulated with them.
+        columns = context["model"].terms_columns
+        rms = np.maximum(context["monomial_rms"], np.finfo(float).tiny)
+        noise = check_random_state(seed).standard_normal(columns.size)
+        candidates = []
+        for scale in (_START_SCALE, 0.1 * _START_SCALE, 0.0):
+            candidate = theta.copy()
+            candidate[columns] = scale * noise / rms
+            candidates.append(candidate)
+        return candidates
 
     def _set_terms(self, values):
         self.E_, self.F_ = values["E"], values["F"]

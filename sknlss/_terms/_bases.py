@@ -70,7 +70,7 @@ class _Basis:
 
     code = _POWERS
 
-    def __init__(self, degree=3, *, constant=True):
+    def __init__(self, degree=3, *, constant=False):
         self.degree = degree
         self.constant = constant
 
@@ -146,8 +146,7 @@ class _Basis:
 
 
 class PolynomialBasis(_Basis):
-    """Powers of the branch input from degree 2 (the linear part is the model's own),
-    and a constant.
+    """Powers of the branch input from degree 2 (the linear part is the model's own).
 
     Parameters
     ----------
@@ -155,23 +154,25 @@ class PolynomialBasis(_Basis):
         Highest power, at least 2.
     kind : {"full", "odd", "even"}, default="full"
         All powers from 2 to ``degree``, the odd ones from 3, or the even ones.
-    constant : bool, default=True
+    constant : bool, default=False
         Include a constant. The model works on centred signals and has no
         bias term of its own: a static nonlinearity expanded around the mean
         operating point instead of its own zero needs the constant that the
         shift creates (the linear terms it creates are the model's linear
-        part).
+        part). It helps where the operating point is far from the
+        nonlinearity's own zero; without it the fit is faster and, on the
+        Silverbox, more accurate.
 
     Examples
     --------
     >>> from sknlss import PolynomialBasis
     >>> PolynomialBasis(5, kind="odd").degrees
-    array([0, 3, 5])
+    array([3, 5])
     """
 
     code = _POWERS
 
-    def __init__(self, degree=3, *, kind="full", constant=True):
+    def __init__(self, degree=3, *, kind="full", constant=False):
         self.degree = degree
         self.kind = kind
         self.constant = constant
@@ -206,7 +207,7 @@ class PolynomialBasis(_Basis):
 
 
 class LegendreBasis(_Basis):
-    """Legendre polynomials of degrees 1 to ``degree`` of ``tanh(z)``, and a constant.
+    """Legendre polynomials of degrees 1 to ``degree`` of ``tanh(z)``.
 
     The squashing keeps every branch bounded, so the model cannot be driven
     to infinity by its nonlinearity when the input leaves the estimation
@@ -216,7 +217,7 @@ class LegendreBasis(_Basis):
     ----------
     degree : int, default=3
         Highest degree, at least 1.
-    constant : bool, default=True
+    constant : bool, default=False
         Include the constant ``P_0`` (see :class:`PolynomialBasis`).
     """
 
@@ -224,7 +225,7 @@ class LegendreBasis(_Basis):
 
 
 class ChebyshevBasis(_Basis):
-    """Chebyshev polynomials of degrees 1 to ``degree`` of ``tanh(z)``, and a constant.
+    """Chebyshev polynomials of degrees 1 to ``degree`` of ``tanh(z)``.
 
     Bounded like :class:`LegendreBasis`; the Chebyshev polynomials weight the
     ends of the range more.
@@ -233,7 +234,7 @@ class ChebyshevBasis(_Basis):
     ----------
     degree : int, default=3
         Highest degree, at least 1.
-    constant : bool, default=True
+    constant : bool, default=False
         Include the constant ``T_0`` (see :class:`PolynomialBasis`).
     """
 
