@@ -88,9 +88,10 @@ def _duffing_stand_in(random_state=0):
 class Benchmark:
     """A benchmark: where its data come from, its models and how it is scored.
 
-    Attributes
+    Parameters
     ----------
     title : str
+        Name printed with the results.
     fetch : callable
         ``fetch(data_home, download_if_missing=...)`` returns the measured data.
     simulate : callable
@@ -248,7 +249,21 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, out=N
 @validate_params({"rows": [list], "records": [dict], "unit": [str]},
                  prefer_skip_nested_validation=True)
 def format_table(rows, records, unit):
-    """The rows of :func:`evaluate` as a text table: median [min, max] per record."""
+    """The rows of :func:`evaluate` as a text table: median [min, max] per record.
+
+    Parameters
+    ----------
+    rows : list of dict
+        The rows of :func:`evaluate`.
+    records : dict
+        The test records (their names head the columns).
+    unit : str
+        Unit of the errors.
+
+    Returns
+    -------
+    table : str
+    """
     header = ["model", "params"] + [f"{name} ({unit})" for name in records] + ["fit (s)"]
     lines = [header]
     for row in rows:

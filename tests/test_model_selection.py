@@ -33,7 +33,7 @@ def _common_end_rms(model, u, y, fraction):
 def test_keeps_the_candidate_with_the_smallest_error_on_the_common_end():
     u, y, _ = _quadratic_system()
     search = HoldoutSearch(
-        PNLSSRegressor(n_states=1, degree=2, max_iter=3),
+        PNLSSRegressor(n_states=1, degree=2, max_iter=3, random_state=0),
         validation_fractions=[0.2, 0.3],
         param_grid={"max_iter": [0, 3]},
     ).fit(u, y)
@@ -47,7 +47,7 @@ def test_keeps_the_candidate_with_the_smallest_error_on_the_common_end():
     assert search.holdout_fraction_ == 0.2
     # The recorded errors are those of each candidate refitted on its own.
     for setting, rms in zip(params, search.results_["holdout_rms"]):
-        candidate = PNLSSRegressor(n_states=1, degree=2).set_params(**setting).fit(u, y)
+        candidate = clone(search.estimator).set_params(**setting).fit(u, y)
         assert rms == pytest.approx(_common_end_rms(candidate, u, y, 0.2), rel=1e-10)
     best = int(np.argmax(search.results_["holdout_score"]))
     assert search.best_index_ == best and search.best_params_ == params[best]

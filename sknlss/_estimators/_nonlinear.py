@@ -195,7 +195,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         """The held-out share of every start."""
         if self.validation_fraction != "auto":
             return [float(self.validation_fraction)] * self.n_init
-        if self.period is not None or np.min(np.diff(starts)) < _MIN_SPLIT_LENGTH:
+        bla = getattr(self, "bla", None)
+        periodic = self.period is not None or getattr(bla, "period", None) is not None
+        if periodic or np.min(np.diff(starts)) < _MIN_SPLIT_LENGTH:
             # Periodic records are fitted in whole periods, and a very short
             # record has no samples to spare: the starts are ranked on the
             # cost (hold out whole periods or realizations by hand, e.g. as a
