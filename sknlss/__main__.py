@@ -41,13 +41,15 @@ def main(argv=None):
     command.add_argument("--output", default="sknlss_output",
                          help="folder for the tables (CSV) and figures (PNG) "
                               "(default: %(default)s)")
+    command.add_argument("--n-jobs", type=int, default=-1,
+                         help="random states fitted at once (default: one per core)")
     command.add_argument("--no-download", action="store_true",
                          help="never download the data; simulate them when absent")
     args = parser.parse_args(argv)
     benchmarks = sorted(BENCHMARKS) if args.benchmark == "all" else [args.benchmark]
     reproduce(benchmarks, data_home=args.data_home, output=args.output,
               download_if_missing=not args.no_download,
-              random_states=tuple(args.random_states))
+              random_states=tuple(args.random_states), n_jobs=args.n_jobs)
     return 0
 
 

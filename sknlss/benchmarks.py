@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 from sklearn.utils._param_validation import HasMethods, validate_params
+from sklearn.utils.parallel import Parallel, delayed
 
 from ._validation import POSITIVE_FINITE
 from .datasets import fetch_cascaded_tanks, fetch_silverbox, make_cascaded_tanks, make_duffing
@@ -195,10 +196,12 @@ def _fit_and_score(factory, seed, data, records, scale):
 
 @validate_params(
     {"data": [HasMethods(["keys"])], "models": [list], "records": [dict],
-     "random_states": ["array-like"], "scale": [POSITIVE_FINITE], "out": _OUT},
+     "random_states": ["array-like"], "scale": [POSITIVE_FINITE], "n_jobs": [int, None],
+     "out": _OUT},
     prefer_skip_nested_validation=True,
 )
-def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, out=None):
+def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, n_jobs=None,
+             out=None):
     """Fit every model at every random state and summarise its test errors.
 
     Parameters
@@ -213,29 +216,34 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, out=N
         Random states of the fits.
     scale : float, default=1.0
         Factor applied to the RMS errors (e.g. 1e3 for mV).
+    n_jobs : int, default=None
+        Number of random states fitted at once (joblib).
     out : file-like, default=None
         Where to print the progress; nothing is printed when None.
 
     Returns
     -------
     rows : list of dict
-        One per model: ``model``, ``n_params``, ``fit_time`` (median, s), and
-        per test record ``<name>`` (median), ``<name> min``, ``<name> max``;
-        a diverging simulation counts as an infinite error.
+        One per model: ``model``, ``n_params``, ``fit_time`` (median, s),
+        ``fallbacks`` (fits that kept their linear model), and per test record
+        ``<name>`` (median), ``<name> min``, ``<name> max``; a diverging
+        simulation counts as an infinite error.
     fitted : dict
         The fitted model of the first random state, by label.
     """
     rows, fitted = [], {}
     for label, factory in models:
-        errors, times = {name: [] for name in records}, []
-        for seed in random_states:
-            model, scores, fit_time = _fit_and_score(factory, seed, data, records, scale)
-            fitted.setdefault(label, model)
-            times.append(fit_time)
-            for name, value in scores.items():
-                errors[name].append(value if math.isfinite(value) else math.inf)
+        runs = Parallel(n_jobs=n_jobs)(
+            delayed(_fit_and_score)(factory, seed, data, records, scale)
+            for seed in random_states)
+        fitted[label] = runs[0][0]
+        errors = {name: [value if math.isfinite(value) else math.inf
+                         for value in (scores[name] for _, scores, _ in runs)]
+                  for name in records}
         row = {"model": label, "n_params": int(fitted[label].n_params_),
-               "fit_time": float(np.median(times))}
+               "fit_time": float(np.median([fit_time for _, _, fit_time in runs])),
+               "fallbacks": sum(bool(getattr(model, "fell_back_to_linear_", False))
+                                for model, _, _ in runs)}
         for name, values in errors.items():
             row[name] = float(np.median(values))
             row[f"{name} min"], row[f"{name} max"] = float(min(values)), float(max(values))
@@ -264,7 +272,8 @@ def format_table(rows, records, unit):
     -------
     table : str
     """
-    header = ["model", "params"] + [f"{name} ({unit})" for name in records] + ["fit (s)"]
+    header = (["model", "params"] + [f"{name} ({unit})" for name in records]
+              + ["fit (s)", "linear kept"])
     lines = [header]
     for row in rows:
         cells = [row["model"], str(row["n_params"])]
@@ -273,6 +282,7 @@ def format_table(rows, records, unit):
             text = ["diverged" if not math.isfinite(v) else f"{v:.4g}" for v in values]
             cells.append(text[0] if text[1] == text[2] else f"{text[0]} [{text[1]}, {text[2]}]")
         cells.append(f"{row['fit_time']:.1f}")
+        cells.append(str(row.get("fallbacks", 0)))
         lines.append(cells)
     widths = [max(len(line[i]) for line in lines) for i in range(len(header))]
     text = ["  ".join(cell.rjust(width) for cell, width in zip(line, widths)) for line in lines]
@@ -283,11 +293,11 @@ def format_table(rows, records, unit):
 @validate_params(
     {"benchmarks": ["array-like"], "data_home": [str, os.PathLike, None],
      "output": [str, os.PathLike, None], "download_if_missing": ["boolean"],
-     "random_states": ["array-like"], "out": _OUT},
+     "random_states": ["array-like"], "n_jobs": [int, None], "out": _OUT},
     prefer_skip_nested_validation=True,
 )
 def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, output=None,
-              download_if_missing=True, random_states=(0, 1, 2), out=None):
+              download_if_missing=True, random_states=(0, 1, 2), n_jobs=None, out=None):
     """Fit the models on the benchmarks and print the result tables.
 
     Parameters
@@ -303,6 +313,8 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
         Whether to download the data when they are absent.
     random_states : sequence of int, default=(0, 1, 2)
         Random states of the fits; the tables give the median and the range.
+    n_jobs : int, default=None
+        Number of random states fitted at once (joblib).
     out : file-like, default=None
         Where to print; standard output when None.
 
@@ -326,7 +338,8 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
         print(f"{benchmark.title}, data: {source}.\nFitted on the estimation record "
               f"only, random states {list(random_states)}.", file=out, flush=True)
         rows, fitted = evaluate(data, benchmark.models(), records,
-                                random_states=random_states, scale=benchmark.scale, out=out)
+                                random_states=random_states, scale=benchmark.scale,
+                                n_jobs=n_jobs, out=out)
         print("\n" + format_table(rows, records, benchmark.unit) + "\n", file=out, flush=True)
         tables[name] = rows
         if output is not None:
