@@ -17,9 +17,11 @@ Cascaded Tanks) and fitted at random states 0-9 on:
 
 It prints, per benchmark, estimator and test record, the median, minimum and
 maximum of the errors and the median fit time, and writes them to
-``--output`` as CSV and Markdown. A diverging simulation counts as an
-infinite error. The BLAS thread setting is printed with the results: run the
-script with ``OPENBLAS_NUM_THREADS=1`` and ``=2`` and compare the medians.
+``--output`` as CSV and Markdown, with every fit as it finishes (JSON lines).
+A diverging simulation counts as an infinite error. The benchmarks are the
+measured records: a missing data file stops the run. The BLAS thread setting
+is printed with the results: run the script with ``OPENBLAS_NUM_THREADS=1`` and
+``=2``, then ``--compare`` the two runs files.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_accuracy.py --output doc/_generated``
 (about an hour on 2 cores; ``--benchmarks`` and ``--random-states`` narrow it).
@@ -45,7 +47,6 @@ from sknlss import (
     PNLSSRegressor,
 )
 from sknlss import datasets as sd
-from sknlss.benchmarks import load_benchmark
 
 #: Number of states of each simulated system's models.
 SIMULATED = {"wiener_hammerstein": 4, "duffing": 2, "bouc_wen": 3, "closed_loop_drive": 2}
@@ -67,17 +68,22 @@ def _models(n_states, estimate_x0=False, tanks=False):
     return models
 
 
+def _measured(name, data_home):
+    """The measured records; a missing file stops the run (never simulated stand-ins)."""
+    return getattr(sd, f"fetch_{name}")(data_home, download_if_missing=False)
+
+
 def _benchmarks(names, data_home):
     """Per benchmark: data, models, test records ``{name: (X, y, skip)}`` and scale."""
     found = {}
     for name in names:
         if name == "cascaded_tanks":
-            data, _ = load_benchmark(name, data_home, download_if_missing=False)
+            data = _measured(name, data_home)
             records = {"test": (data.X_test, data.y_test, 0),
                        "test[50:]": (data.X_test, data.y_test, data.init_window)}
             found[name] = (data, _models(3, estimate_x0=True, tanks=True), records, 1.0, "V")
         elif name == "silverbox":
-            data, _ = load_benchmark(name, data_home, download_if_missing=False)
+            data = _measured(name, data_home)
             records = {key: (r.X, r.y, data.init_window) for key, r in data.tests.items()}
             found[name] = (data, _models(2), records, 1e3, "mV")
         else:
@@ -86,6 +92,10 @@ def _benchmarks(names, data_home):
             found[name] = (data, _models(SIMULATED[name]), records,
                            1.0 / np.std(data.y_test[data.init_window:]), "relative")
     return found
+
+
+#: Fields of a run that are not test records.
+_RUN_FIELDS = ("benchmark", "model", "seed", "fit_time", "n_params", "error", "fallback")
 
 
 def _run(benchmark, label, seed, data, factory, records, scale):
@@ -110,44 +120,78 @@ def _run(benchmark, label, seed, data, factory, records, scale):
 
 
 def _summary(runs, found):
+    """One row per benchmark, model and test record (long format)."""
     lines = []
     for benchmark, (_, models, records, _, unit) in found.items():
         for label in models:
             rows = [r for r in runs if r["benchmark"] == benchmark and r["model"] == label]
             if not rows:
                 continue
-            summary = {"benchmark": benchmark, "model": label, "unit": unit,
-                       "n_params": max(r["n_params"] for r in rows), "runs": len(rows),
-                       "failed": sum(bool(r["error"]) for r in rows),
-                       "fallbacks": sum(r["fallback"] for r in rows),
-                       "fit_time": float(np.median([r["fit_time"] for r in rows]))}
             for name in records:
                 values = np.array([r[name] for r in rows])
-                summary[f"{name} median"] = float(np.median(values))
-                summary[f"{name} min"] = float(values.min())
-                summary[f"{name} max"] = float(values.max())
-            lines.append(summary)
+                lines.append({
+                    "benchmark": benchmark, "model": label, "record": name, "unit": unit,
+                    "params": max(r["n_params"] for r in rows),
+                    "median": float(np.median(values)), "min": float(values.min()),
+                    "max": float(values.max()),
+                    "fit time (s)": round(float(np.median([r["fit_time"] for r in rows])), 1),
+                    "fallbacks": f"{sum(r['fallback'] for r in rows)}/{len(rows)}",
+                    "failed": sum(bool(r["error"]) for r in rows)})
     return lines
 
 
-def _markdown(summary, found, setting):
+def _markdown(summary, setting):
     text = [f"BLAS threads: {setting}; {platform.machine()}, Python {platform.python_version()}",
             ""]
-    for benchmark, (_, _, records, _, unit) in found.items():
+    for benchmark in dict.fromkeys(s["benchmark"] for s in summary):
         rows = [s for s in summary if s["benchmark"] == benchmark]
-        text += [f"### {benchmark} ({unit})", "",
+        records = list(dict.fromkeys(s["record"] for s in rows))
+        text += [f"### {benchmark} ({rows[0]['unit']})", "",
                  "| model | params | " + " | ".join(f"{name} median [min, max]"
                                                    for name in records)
                  + " | fit (s) | fallbacks | failed |",
                  "|---|---|" + "---|" * len(records) + "---|---|---|"]
-        for s in rows:
-            cells = [f"{s[f'{name} median']:.4g} [{s[f'{name} min']:.4g}, "
-                     f"{s[f'{name} max']:.4g}]" for name in records]
-            text.append(f"| {s['model']} | {s['n_params']} | " + " | ".join(cells)
-                        + f" | {s['fit_time']:.1f} | {s['fallbacks']}/{s['runs']} "
-                        f"| {s['failed']} |")
+        for label in dict.fromkeys(s["model"] for s in rows):
+            cells = {s["record"]: s for s in rows if s["model"] == label}
+            first = cells[records[0]]
+            text.append(f"| {label} | {first['params']} | " + " | ".join(
+                f"{cells[name]['median']:.4g} [{cells[name]['min']:.4g}, "
+                f"{cells[name]['max']:.4g}]" for name in records)
+                + f" | {first['fit time (s)']} | {first['fallbacks']} | {first['failed']} |")
         text.append("")
     return "\n".join(text)
+
+
+def _write_csv(path, rows):
+    with open(path, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({key: (f"{value:.4g}" if isinstance(value, float) else value)
+                          for key, value in row.items()} for row in rows)
+
+
+def _read_runs(path):
+    """The fits of a runs file, by (benchmark, model, seed)."""
+    with open(path, encoding="utf-8") as handle:
+        return {(r["benchmark"], r["model"], r["seed"]): r for r in map(json.loads, handle)}
+
+
+def _compare(first, second):
+    """Medians of two runs over the fits they share, with their relative change."""
+    a, b = _read_runs(first), _read_runs(second)
+    shared = sorted(a.keys() & b.keys())
+    rows = []
+    for benchmark, model in dict.fromkeys(key[:2] for key in shared):
+        keys = [key for key in shared if key[:2] == (benchmark, model)]
+        names = [name for name in a[keys[0]] if name not in _RUN_FIELDS]
+        for name in names:
+            median_a = float(np.median([a[key][name] for key in keys]))
+            median_b = float(np.median([b[key][name] for key in keys]))
+            change = abs(median_b - median_a) / median_a if np.isfinite(median_a) else np.nan
+            rows.append({"benchmark": benchmark, "model": model, "record": name,
+                         "random states": len(keys), "median (1st)": median_a,
+                         "median (2nd)": median_b, "relative change": change})
+    return rows
 
 
 def main():
@@ -159,8 +203,27 @@ def main():
     parser.add_argument("--data-home", default=None)
     parser.add_argument("--n-jobs", type=int, default=2)
     parser.add_argument("--output", default=None,
-                        help="folder for bench_accuracy.csv/.md and the raw runs (JSON lines)")
+                        help="folder for bench_accuracy_threads<N>.csv/.md and the raw "
+                             "runs (JSON lines, written as the fits finish)")
+    parser.add_argument("--compare", nargs=2, metavar="RUNS", default=None,
+                        help="instead of fitting, compare the medians of two runs "
+                             "(their *_runs.jsonl files) over the fits they share")
+    parser.add_argument("--summarize", metavar="RUNS", default=None,
+                        help="instead of fitting, summarise a runs file (e.g. of an "
+                             "interrupted run) into the tables")
     args = parser.parse_args()
+    if args.summarize:
+        _write_tables(_read_runs(args.summarize).values(), args.data_home,
+                      Path(args.summarize).name.removesuffix("_runs.jsonl"), args.output)
+        return
+    if args.compare:
+        rows = _compare(*args.compare)
+        for row in rows:
+            print("  ".join(f"{v:.4g}" if isinstance(v, float) else str(v)
+                            for v in row.values()))
+        if args.output:
+            _write_csv(Path(args.output) / "bench_accuracy_threads_compare.csv", rows)
+        return
     setting = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
     found = _benchmarks(args.benchmarks, args.data_home)
     jobs = [(benchmark, label, seed, data, factory, records, scale)
@@ -168,22 +231,32 @@ def main():
             for label, factory in models.items()
             if args.models is None or label in args.models
             for seed in args.random_states]
-    runs = Parallel(n_jobs=args.n_jobs)(delayed(_run)(*job) for job in jobs)
-    if args.output:
-        Path(args.output).mkdir(parents=True, exist_ok=True)
-    summary = _summary(runs, found)
-    text = _markdown(summary, found, setting)
-    print(text)
-    if args.output:
-        output = Path(args.output)
+    output = Path(args.output) if args.output else None
+    stem = f"bench_accuracy_threads{setting}"
+    runs = []
+    if output:
         output.mkdir(parents=True, exist_ok=True)
-        stem = f"bench_accuracy_threads{setting}"
-        with open(output / f"{stem}_runs.jsonl", "w", encoding="utf-8") as handle:
-            handle.writelines(json.dumps(run) + "\n" for run in runs)
-        with open(output / f"{stem}.csv", "w", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(summary[0]))
-            writer.writeheader()
-            writer.writerows(summary)
+        (output / f"{stem}_runs.jsonl").write_text("", encoding="utf-8")
+    for run in Parallel(n_jobs=args.n_jobs, return_as="generator_unordered")(
+            delayed(_run)(*job) for job in jobs):
+        runs.append(run)
+        if output:
+            # Each fit is kept as it finishes: an interrupted run loses nothing done.
+            with open(output / f"{stem}_runs.jsonl", "a", encoding="utf-8") as handle:
+                handle.write(json.dumps(run) + "\n")
+    _write_tables(runs, args.data_home, stem, output, found)
+
+
+def _write_tables(runs, data_home, stem, output, found=None):
+    runs = list(runs)
+    if found is None:
+        found = _benchmarks(list(dict.fromkeys(r["benchmark"] for r in runs)), data_home)
+    summary = _summary(runs, found)
+    text = _markdown(summary, stem.removeprefix("bench_accuracy_threads"))
+    print(text)
+    if output:
+        output = Path(output)
+        _write_csv(output / f"{stem}.csv", summary)
         (output / f"{stem}.md").write_text(text + "\n", encoding="utf-8")
 
 

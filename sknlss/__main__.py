@@ -42,7 +42,7 @@ def main(argv=None):
                          help="folder for the tables (CSV) and figures (PNG) "
                               "(default: %(default)s)")
     command.add_argument("--n-jobs", type=int, default=-1,
-                         help="random states fitted at once (default: one per core)")
+                         help="fits run at once (default: one per core)")
     command.add_argument("--no-download", action="store_true",
                          help="never download the data; simulate them when absent")
     args = parser.parse_args(argv)

@@ -217,9 +217,9 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, n_job
     scale : float, default=1.0
         Factor applied to the RMS errors (e.g. 1e3 for mV).
     n_jobs : int, default=None
-        Number of random states fitted at once (joblib).
+        Number of fits run at once (joblib), over models and random states.
     out : file-like, default=None
-        Where to print the progress; nothing is printed when None.
+        Where to print the results per model; nothing is printed when None.
 
     Returns
     -------
@@ -231,11 +231,15 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, n_job
     fitted : dict
         The fitted model of the first random state, by label.
     """
+    # Every (model, random state) pair is one job: the slow models do not
+    # leave workers idle while the fast ones wait for their turn.
+    jobs = [(label, factory, seed) for label, factory in models for seed in random_states]
+    results = Parallel(n_jobs=n_jobs)(
+        delayed(_fit_and_score)(factory, seed, data, records, scale)
+        for _, factory, seed in jobs)
     rows, fitted = [], {}
-    for label, factory in models:
-        runs = Parallel(n_jobs=n_jobs)(
-            delayed(_fit_and_score)(factory, seed, data, records, scale)
-            for seed in random_states)
+    for label, _ in models:
+        runs = [result for (name, _, _), result in zip(jobs, results) if name == label]
         fitted[label] = runs[0][0]
         errors = {name: [value if math.isfinite(value) else math.inf
                          for value in (scores[name] for _, scores, _ in runs)]
@@ -314,7 +318,7 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
     random_states : sequence of int, default=(0, 1, 2)
         Random states of the fits; the tables give the median and the range.
     n_jobs : int, default=None
-        Number of random states fitted at once (joblib).
+        Number of fits run at once (joblib), over models and random states.
     out : file-like, default=None
         Where to print; standard output when None.
 

@@ -144,3 +144,17 @@ def test_convergence_warning_from_the_shared_optimiser(record):
     u, y = record
     with pytest.warns(ConvergenceWarning, match="max_iter=2"):
         NLLFRRegressor(n_states=2, max_iter=2, validation_fraction=0.0, n_init=1).fit(u, y)
+
+
+def test_only_the_kept_start_warns(record):
+    u, y = record
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = PNLSSRegressor(2, max_iter=2, n_init=3, random_state=0).fit(u, y)
+    convergence = [w for w in caught if issubclass(w.category, ConvergenceWarning)]
+    kept = 0 if model.fell_back_to_linear_ else 1
+    assert len(convergence) == kept
+    best = int(np.argmin(model.start_losses_))
+    assert all(f"start {best}:" in str(w.message) for w in convergence)
+    # The warning points at the caller of fit, not into the library.
+    assert all(w.filename == __file__ for w in convergence)

@@ -339,7 +339,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                   or not stays_bounded(common, outcome[0]) else holdout_loss(common, outcome[0])
                   for outcome in outcomes]
         best = int(np.argmin(losses))
-        theta_best, result = outcomes[best]
+        theta_best, result, start_warnings = outcomes[best]
         self.start_losses_ = np.asarray(losses)
         linear_loss = holdout_loss(common, theta)
         # A nonlinear model that does worse than its linear start there is not
@@ -352,6 +352,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                       f"data ({losses[best]:.3g} against {linear_loss:.3g}); the linear "
                       "model is kept.")
             theta_best = theta
+        else:
+            for message, category in start_warnings:
+                # Pointing at the caller of fit: _search, _fit_normalized, fit
+                # and its guard lie in between.
+                warnings.warn(message, category, stacklevel=5)
         self._record_start(context, best, seeds[best])
         return theta_best, result
 
@@ -373,9 +378,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 
 
 def _fit_start(estimator, context, problem, start, seed, label, options):
-    """One start: the estimator's candidates, then Levenberg-Marquardt on ``problem``."""
-    candidates = estimator._starting_points(context, start, seed)
-    return fit_from(problem, candidates, label=label, **options)
+    """One start: the estimator's candidates, then Levenberg-Marquardt on ``problem``.
+
+    Returns the parameters, the optimiser's result and the warnings the start
+    raised, as ``(message, category)`` pairs: they concern the user only if
+    this start is the one kept.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        candidates = estimator._starting_points(context, start, seed)
+        theta, result = fit_from(problem, candidates, label=label, **options)
+    return theta, result, [(warning.message, warning.category) for warning in caught]
 
 
 def stays_bounded(problem, theta):

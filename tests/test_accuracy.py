@@ -1,0 +1,82 @@
+"""Accuracy on the measured benchmarks with the estimators' defaults.
+
+Every model is given its structure only and fitted at three random states; the
+median of the test errors must stay within its bound (DESIGN.md §3 protocol:
+nothing but the final number uses a test record). The margin between a bound
+and the median measured by ``benchmarks/bench_accuracy.py`` over random states
+0-9 is at least the spread it measured (see each test). The Cascaded Tanks
+models, whose test errors spread over tenths of a volt between random states,
+are followed by that benchmark, not here.
+"""
+
+import warnings
+
+import numpy as np
+import pytest
+from joblib import Parallel, delayed
+
+from sknlss import NLLFRRegressor, PNLSSRegressor
+
+pytestmark = [pytest.mark.slow, pytest.mark.realdata]
+
+SEEDS = (0, 1, 2)
+
+
+def _fit(factory, seed, X, y):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return factory(seed).fit(X, y)
+
+
+def _median_errors(factory, data, records, scale=1.0):
+    """Median over SEEDS of the RMS error on each record ``(X, y, skip)``."""
+    models = Parallel(n_jobs=2)(delayed(_fit)(factory, seed, data.X_est, data.y_est)
+                                for seed in SEEDS)
+    medians = {}
+    for name, (X, y, skip) in records.items():
+        errors = []
+        for model in models:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                error = model.predict(X)[skip:] - y[skip:]
+            errors.append(scale * np.sqrt(np.mean(error**2))
+                          if np.all(np.isfinite(error)) else np.inf)
+        medians[name] = float(np.median(errors))
+    return medians, models
+
+
+def _silverbox_tests(data):
+    return {name: (record.X, record.y, data.init_window)
+            for name, record in data.tests.items()}
+
+
+def test_silverbox_pnlss(silverbox):
+    """Silverbox, PNLSS with ``n_states=2`` and its defaults: <= 0.35 mV on the
+    multisine and on the arrow without extrapolation. Over random states 0-9
+    ``benchmarks/bench_accuracy.py`` measured medians of 0.266 mV [0.266,
+    0.268] and 0.241 mV [0.239, 0.242]: the margin is thirty times the
+    spread."""
+    medians, models = _median_errors(
+        lambda seed: PNLSSRegressor(n_states=2, random_state=seed), silverbox,
+        _silverbox_tests(silverbox), scale=1e3)
+    assert medians["multisine"] <= 0.35
+    assert medians["arrow"] <= 0.35
+    assert all(model.n_params_ == 57 for model in models)
+
+
+def test_silverbox_nllfr(silverbox):
+    """Silverbox, NL-LFR with ``n_states=2`` and its defaults, 17 parameters.
+
+    Over random states 0-9 the benchmark measured 0.295 mV [0.2949, 0.2953] on
+    the multisine and 0.366 mV [0.3645, 0.3668] on the full arrow. The bounds,
+    0.30 and 0.38 mV, hold what is reached with a margin of more than five
+    times that spread; they are not yet the targets of 0.29 and 0.34 mV (the
+    frequency-domain NL-LFR recipe of freq-statespace reaches 0.288 and
+    0.334 mV).
+    """
+    medians, models = _median_errors(
+        lambda seed: NLLFRRegressor(n_states=2, random_state=seed), silverbox,
+        _silverbox_tests(silverbox), scale=1e3)
+    assert medians["multisine"] <= 0.30
+    assert medians["arrow_full"] <= 0.38
+    assert all(model.n_params_ <= 25 for model in models)
