@@ -2,11 +2,13 @@
 
 import io
 import math
+import warnings
 
 import numpy as np
 import pytest
+from sklearn.exceptions import ConvergenceWarning
 
-from sknlss import BLAEstimator, benchmarks
+from sknlss import BLAEstimator, PNLSSRegressor, benchmarks
 from sknlss.__main__ import main
 from sknlss.benchmarks import BENCHMARKS, Benchmark, evaluate, format_table, reproduce
 from sknlss.datasets import make_cascaded_tanks
@@ -91,3 +93,16 @@ def test_benchmarks_define_their_models(name):
     for label, factory in models:
         estimator = factory(0)
         assert hasattr(estimator, "fit") and np.isscalar(estimator.get_params()["n_states"])
+
+
+def test_evaluate_counts_fits_stopped_while_improving():
+    data = make_cascaded_tanks(n_samples=256, random_state=0)
+    records = {"test": (data.X_test, data.y_test, 0)}
+    factory = lambda seed: PNLSSRegressor(n_states=2, degree=2, max_iter=1, n_init=1,  # noqa: E731
+                                          validation_fraction=0.0, random_state=seed)
+    with warnings.catch_warnings():
+        # The table says it; nothing is printed.
+        warnings.simplefilter("error", ConvergenceWarning)
+        rows, _ = evaluate(data, [("PNLSS", factory)], records, random_states=(0, 1))
+    assert rows[0]["still_improving"] == 2
+    assert "at max_iter" in format_table(rows, records, "V")

@@ -1,8 +1,11 @@
 """Decoupled PNLSS: the branch terms and the estimator."""
 
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.base import clone
+from sklearn.exceptions import ConvergenceWarning
 
 from sknlss import DecoupledPNLSS, PNLSSRegressor, PolynomialBasis
 from sknlss._core._model import StateSpaceModel
@@ -155,3 +158,16 @@ def test_several_starts_in_parallel_match_sequential(wiener_data):
     single = DecoupledPNLSS(**{**params, "n_init": 1}).fit(u, y)
     assert sequential.start_losses_.shape == (2,) and single.start_losses_.shape == (1,)
     assert np.all(np.isfinite(sequential.start_losses_))
+
+
+def test_only_the_final_optimisation_warns(wiener_data):
+    u, y = wiener_data
+    # The PNLSS starting point stops at max_iter while improving; only the
+    # decoupled model's own optimisation may say so.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        DecoupledPNLSS(n_states=2, rank=1, pnlss=PNLSSRegressor(degree=2, max_iter=2, **PLAIN),
+                       max_iter=30, random_state=0, **PLAIN).fit(u, y)
+    from_pnlss = [w for w in caught if issubclass(w.category, ConvergenceWarning)
+                  and str(w.message).startswith("PNLSS")]
+    assert not from_pnlss

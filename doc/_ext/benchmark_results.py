@@ -45,7 +45,11 @@ class BenchmarkResult(SphinxDirective):
         caption = " ".join(self.options.get("caption", "").split())
         suffix = Path(path).suffix.lower()
         if suffix == ".csv":
-            text = f".. csv-table:: {caption}\n   :file: {path}\n   :header-rows: 1\n"
+            # The rows go in as the table's content: a :file: option would be
+            # resolved against the working folder when the text is parsed here.
+            rows = Path(absolute).read_text(encoding="utf-8").splitlines()
+            text = (f".. csv-table:: {caption}\n   :header-rows: 1\n\n"
+                    + "".join(f"   {row}\n" for row in rows if row.strip()))
         elif suffix == ".png":
             text = f".. figure:: {path}\n\n   {caption}\n"
         else:

@@ -6,8 +6,11 @@ the CPD of their Jacobians (:func:`~sknlss._terms._cpd.decouple_polynomial`); th
 decoupled model is then re-optimised on the simulation error.
 """
 
+import warnings
+
 import numpy as np
 from sklearn.base import clone
+from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, StrOptions
 
@@ -354,7 +357,12 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self._validate_params()
         pnlss = clone(self.pnlss if self.pnlss is not None else PNLSSRegressor())
         pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
-        self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
+        with warnings.catch_warnings():
+            # The PNLSS model is the starting point of the decoupling, which is
+            # optimised again: whether its own iterations had settled is not
+            # the result (the final optimisation warns for itself).
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
         return super().fit(X, y, sequence_id=sequence_id)
 
     def _centred(self):
