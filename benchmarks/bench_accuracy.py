@@ -162,6 +162,16 @@ def _markdown(summary, setting):
     return "\n".join(text)
 
 
+def _table_rows(summary):
+    """The summary as the documentation shows it: the unit with the record and
+    the range in one column, so that the table fits the page."""
+    return [{"benchmark": s["benchmark"], "model": s["model"],
+             "record": f"{s['record']} ({s['unit']})", "params": s["params"],
+             "median": f"{s['median']:.4g}", "range": f"{s['min']:.4g} - {s['max']:.4g}",
+             "fit (s)": s["fit time (s)"], "fallbacks": s["fallbacks"], "failed": s["failed"]}
+            for s in summary]
+
+
 def _write_csv(path, rows):
     with open(path, "w", newline="", encoding="utf-8") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
@@ -256,7 +266,7 @@ def _write_tables(runs, data_home, stem, output, found=None):
     print(text)
     if output:
         output = Path(output)
-        _write_csv(output / f"{stem}.csv", summary)
+        _write_csv(output / f"{stem}.csv", _table_rows(summary))
         (output / f"{stem}.md").write_text(text + "\n", encoding="utf-8")
 
 
