@@ -32,7 +32,6 @@ import csv
 import json
 import os
 import platform
-import time
 import warnings
 from pathlib import Path
 
@@ -47,6 +46,7 @@ from sknlss import (
     PNLSSRegressor,
 )
 from sknlss import datasets as sd
+from sknlss.benchmarks import _fit_and_score
 
 #: Number of states of each simulated system's models.
 SIMULATED = {"wiener_hammerstein": 4, "duffing": 2, "bouc_wen": 3, "closed_loop_drive": 2}
@@ -100,23 +100,17 @@ _RUN_FIELDS = ("benchmark", "model", "seed", "fit_time", "n_params", "error", "f
 
 def _run(benchmark, label, seed, data, factory, records, scale):
     warnings.simplefilter("ignore")
-    model = factory(seed)
-    start = time.perf_counter()
     try:
-        model.fit(data.X_est, data.y_est)
+        result = _fit_and_score(factory, seed, data, records, scale)
     except Exception as error:  # a failed fit is a result too: reported, not fatal
         return {"benchmark": benchmark, "model": label, "seed": seed, "fit_time": 0.0,
                 "n_params": 0, "fallback": False, "error": repr(error),
                 **{name: float("nan") for name in records}}
-    elapsed = time.perf_counter() - start
-    row = {"benchmark": benchmark, "model": label, "seed": seed, "fit_time": elapsed,
-           "n_params": int(model.n_params_), "error": "",
-           "fallback": bool(getattr(model, "fell_back_to_linear_", False))}
-    for name, (X, y, skip) in records.items():
-        error = model.predict(X)[skip:] - y[skip:]
-        row[name] = (float(scale * np.sqrt(np.mean(error**2)))
-                     if np.all(np.isfinite(error)) else float("inf"))
-    return row
+    model = result["model"]
+    return {"benchmark": benchmark, "model": label, "seed": seed,
+            "fit_time": result["fit_time"], "n_params": int(model.n_params_), "error": "",
+            "fallback": bool(getattr(model, "fell_back_to_linear_", False)),
+            **{name: float(value) for name, value in result["errors"].items()}}
 
 
 def _summary(runs, found):

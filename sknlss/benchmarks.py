@@ -182,6 +182,12 @@ def load_benchmark(name, data_home=None, *, download_if_missing=True, out=None):
 
 
 def _fit_and_score(factory, seed, data, records, scale):
+    """Fit ``factory(seed)`` on the estimation record and score it on ``records``.
+
+    Returns a dict: ``model``, ``errors`` (scaled RMS error per record, inf
+    for a diverging simulation), ``fit_time`` (s) and ``still_improving``
+    (whether ``max_iter`` stopped the fit while it was still improving).
+    """
     model = factory(seed)
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -189,19 +195,20 @@ def _fit_and_score(factory, seed, data, records, scale):
         # while still improving is a fact for the table, not advice.
         warnings.simplefilter("always", ConvergenceWarning)
         model.fit(data.X_est, data.y_est)
+    fit_time = time.perf_counter() - start
     for warning in caught:
         if not issubclass(warning.category, ConvergenceWarning):
             warnings.warn_explicit(warning.message, warning.category, warning.filename,
                                    warning.lineno)
-    still_improving = any(issubclass(w.category, ConvergenceWarning) for w in caught)
-    fit_time = time.perf_counter() - start
     errors = {}
     with warnings.catch_warnings():
         # A diverging simulation is reported as such in the table.
         warnings.simplefilter("ignore", SimulationDivergedWarning)
         for name, (X, y, skip) in records.items():
             errors[name] = scale * rms_error(y[skip:], model.predict(X)[skip:])
-    return model, errors, fit_time, still_improving
+    return {"model": model, "errors": errors, "fit_time": fit_time,
+            "still_improving": any(issubclass(w.category, ConvergenceWarning)
+                                   for w in caught)}
 
 
 @validate_params(
@@ -251,15 +258,15 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, n_job
     rows, fitted = [], {}
     for label, _ in models:
         runs = [result for (name, _, _), result in zip(jobs, results) if name == label]
-        fitted[label] = runs[0][0]
+        fitted[label] = runs[0]["model"]
         errors = {name: [value if math.isfinite(value) else math.inf
-                         for value in (run[1][name] for run in runs)]
+                         for value in (run["errors"][name] for run in runs)]
                   for name in records}
         row = {"model": label, "n_params": int(fitted[label].n_params_),
-               "fit_time": float(np.median([run[2] for run in runs])),
-               "fallbacks": sum(bool(getattr(run[0], "fell_back_to_linear_", False))
+               "fit_time": float(np.median([run["fit_time"] for run in runs])),
+               "fallbacks": sum(bool(getattr(run["model"], "fell_back_to_linear_", False))
                                 for run in runs),
-               "still_improving": sum(run[3] for run in runs)}
+               "still_improving": sum(run["still_improving"] for run in runs)}
         for name, values in errors.items():
             row[name] = float(np.median(values))
             row[f"{name} min"], row[f"{name} max"] = float(min(values)), float(max(values))

@@ -9,45 +9,24 @@ models, whose test errors spread over tenths of a volt between random states,
 are followed by that benchmark, not here.
 """
 
-import warnings
-
-import numpy as np
 import pytest
-from joblib import Parallel, delayed
 
 from sknlss import NLLFRRegressor, PNLSSRegressor
+from sknlss.benchmarks import evaluate
 
 pytestmark = [pytest.mark.slow, pytest.mark.realdata]
 
 SEEDS = (0, 1, 2)
 
 
-def _fit(factory, seed, X, y):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return factory(seed).fit(X, y)
-
-
-def _median_errors(factory, data, records, scale=1.0):
-    """Median over SEEDS of the RMS error on each record ``(X, y, skip)``."""
-    models = Parallel(n_jobs=2)(delayed(_fit)(factory, seed, data.X_est, data.y_est)
-                                for seed in SEEDS)
-    medians = {}
-    for name, (X, y, skip) in records.items():
-        errors = []
-        for model in models:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                error = model.predict(X)[skip:] - y[skip:]
-            errors.append(scale * np.sqrt(np.mean(error**2))
-                          if np.all(np.isfinite(error)) else np.inf)
-        medians[name] = float(np.median(errors))
-    return medians, models
-
-
-def _silverbox_tests(data):
-    return {name: (record.X, record.y, data.init_window)
-            for name, record in data.tests.items()}
+def _silverbox_medians(factory, data):
+    """Median over SEEDS of the RMS error (mV) on each Silverbox test record,
+    with the number of parameters."""
+    records = {name: (record.X, record.y, data.init_window)
+               for name, record in data.tests.items()}
+    rows, _ = evaluate(data, [("model", factory)], records, random_states=SEEDS,
+                       scale=1e3, n_jobs=2)
+    return rows[0]
 
 
 def test_silverbox_pnlss(silverbox):
@@ -56,12 +35,11 @@ def test_silverbox_pnlss(silverbox):
     ``benchmarks/bench_accuracy.py`` measured medians of 0.266 mV [0.266,
     0.268] and 0.241 mV [0.239, 0.242]: the margin is thirty times the
     spread."""
-    medians, models = _median_errors(
-        lambda seed: PNLSSRegressor(n_states=2, random_state=seed), silverbox,
-        _silverbox_tests(silverbox), scale=1e3)
+    medians = _silverbox_medians(
+        lambda seed: PNLSSRegressor(n_states=2, random_state=seed), silverbox)
     assert medians["multisine"] <= 0.35
     assert medians["arrow"] <= 0.35
-    assert all(model.n_params_ == 57 for model in models)
+    assert medians["n_params"] == 57
 
 
 def test_silverbox_nllfr(silverbox):
@@ -74,9 +52,8 @@ def test_silverbox_nllfr(silverbox):
     frequency-domain NL-LFR recipe of freq-statespace reaches 0.288 and
     0.334 mV).
     """
-    medians, models = _median_errors(
-        lambda seed: NLLFRRegressor(n_states=2, random_state=seed), silverbox,
-        _silverbox_tests(silverbox), scale=1e3)
+    medians = _silverbox_medians(
+        lambda seed: NLLFRRegressor(n_states=2, random_state=seed), silverbox)
     assert medians["multisine"] <= 0.30
     assert medians["arrow_full"] <= 0.38
-    assert all(model.n_params_ <= 25 for model in models)
+    assert medians["n_params"] <= 25
