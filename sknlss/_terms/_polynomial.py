@@ -170,42 +170,85 @@ def monomial_exponents(n_states, n_inputs, degree, structure="full"):
     return np.array(rows, dtype=np.int64)
 
 
-@njit(cache=True)
-def _fill_powers(s, powers):
-    # powers[j, p] = s[j] ** p, shared by every monomial and its derivatives.
-    for j in range(s.shape[0]):
-        powers[j, 0] = 1.0
-        for p in range(1, powers.shape[1]):
-            powers[j, p] = powers[j, p - 1] * s[j]
+# ------------------------------------------------------- compiled evaluation
+# The monomials are evaluated from integer tables (the "spec") built once per
+# exponent array, into a flat scratch array ("work"):
+#
+# spec = [n_vars, n_monomials, width, n_factors, n_diff,
+#         factors (n_monomials x n_factors),
+#         derivative rows (n_monomials x n_diff x (n_factors + 1))]
+# work = [powers (n_vars x width), monomials (n_monomials),
+#         derivatives (n_monomials x n_diff)]
+#
+# with ``work[j * width + p] = s_j ** p``. Row k of ``factors`` holds the
+# positions in work of the powers whose product is monomial k, in the order of
+# the variables, padded with position 0 (``s_0 ** 0 = 1``). The derivative row
+# of monomial k and variable i holds the exponent e of s_i, the position of
+# ``s_i ** (e - 1)`` and those of the other factors (all padding when e = 0).
+# Every monomial is then a fixed number of products without branches, and the
+# compiled functions index the flat arrays directly: views made at every
+# sample would cost more than the arithmetic.
+_HEADER = 5
+
+
+def _monomial_spec(exponents, n_diff):
+    """The integer tables of the monomials ``exponents`` (see above), with
+    derivatives with respect to the first ``n_diff`` variables."""
+    exponents = np.asarray(exponents, dtype=np.int64)
+    n_monomials, n_vars = exponents.shape
+    width = _max_degree(exponents) + 1
+    n_factors = max(1, int(np.count_nonzero(exponents, axis=1).max(initial=0)))
+    factors = np.zeros((n_monomials, n_factors), dtype=np.int64)
+    derivatives = np.zeros((n_monomials, n_diff, n_factors + 1), dtype=np.int64)
+    for k, row in enumerate(exponents):
+        present = [(j, int(e)) for j, e in enumerate(row) if e]
+        factors[k, : len(present)] = [j * width + e for j, e in present]
+        for i in range(n_diff):
+            if row[i]:
+                others = [j * width + e for j, e in present if j != i]
+                derivatives[k, i, : 2 + len(others)] = [row[i], i * width + row[i] - 1,
+                                                        *others]
+    header = [n_vars, n_monomials, width, n_factors, n_diff]
+    return np.concatenate([header, factors.ravel(), derivatives.ravel()]).astype(np.int64)
+
+
+def _work_size(spec):
+    n_vars, n_monomials, width, _, n_diff = spec[:_HEADER]
+    return int(n_vars * width + n_monomials * (1 + n_diff))
 
 
 @njit(cache=True)
-def _monomials(powers, exponents, out):
-    for k in range(exponents.shape[0]):
+def _fill_monomials(spec, s, work):
+    """Powers of ``s`` and the monomials, into work."""
+    n_vars, n_monomials, width, n_factors = spec[0], spec[1], spec[2], spec[3]
+    for j in range(n_vars):
+        base = j * width
+        work[base] = 1.0
+        for p in range(1, width):
+            work[base + p] = work[base + p - 1] * s[j]
+    o_values = n_vars * width
+    for k in range(n_monomials):
         value = 1.0
-        for j in range(exponents.shape[1]):
-            e = exponents[k, j]
-            if e:
-                value *= powers[j, e]
-        out[k] = value
+        row = _HEADER + k * n_factors
+        for f in range(n_factors):
+            value *= work[spec[row + f]]
+        work[o_values + k] = value
 
 
 @njit(cache=True)
-def _derivatives(powers, exponents, n_vars, out):
-    # out[k, i] = d monomial_k / d s_i for the first n_vars variables.
-    for k in range(exponents.shape[0]):
-        for i in range(n_vars):
-            e = exponents[k, i]
-            if e == 0:
-                out[k, i] = 0.0
-                continue
-            value = e * powers[i, e - 1]
-            for j in range(exponents.shape[1]):
-                if j != i:
-                    ej = exponents[k, j]
-                    if ej:
-                        value *= powers[j, ej]
-            out[k, i] = value
+def _fill_derivatives(spec, work):
+    """Derivatives of the monomials, into work (after :func:`_fill_monomials`)."""
+    n_vars, n_monomials, width, n_factors, n_diff = (spec[0], spec[1], spec[2], spec[3],
+                                                     spec[4])
+    o_rows = _HEADER + n_monomials * n_factors
+    o_out = n_vars * width + n_monomials
+    for k in range(n_monomials):
+        for i in range(n_diff):
+            row = o_rows + (k * n_diff + i) * (n_factors + 1)
+            value = spec[row] * work[spec[row + 1]]
+            for f in range(n_factors - 1):
+                value *= work[spec[row + 2 + f]]
+            work[o_out + k * n_diff + i] = value
 
 
 def _max_degree(exponents):
@@ -213,28 +256,35 @@ def _max_degree(exponents):
 
 
 @njit(cache=True)
-def _batch_values(S, exponents, max_degree):
-    values = np.empty((S.shape[0], exponents.shape[0]))
-    powers = np.empty((S.shape[1], max_degree + 1))
+def _batch_values(S, spec, work):
+    n_vars, n_monomials, width = spec[0], spec[1], spec[2]
+    o_values = n_vars * width
+    values = np.empty((S.shape[0], n_monomials))
     for t in range(S.shape[0]):
-        _fill_powers(S[t], powers)
-        _monomials(powers, exponents, values[t])
+        _fill_monomials(spec, S[t], work)
+        for k in range(n_monomials):
+            values[t, k] = work[o_values + k]
     return values
 
 
 @njit(cache=True)
-def _batch_derivatives(S, exponents, max_degree):
-    derivatives = np.empty((S.shape[0], exponents.shape[0], S.shape[1]))
-    powers = np.empty((S.shape[1], max_degree + 1))
+def _batch_derivatives(S, spec, work):
+    n_vars, n_monomials, width = spec[0], spec[1], spec[2]
+    o_out = n_vars * width + n_monomials
+    derivatives = np.empty((S.shape[0], n_monomials, n_vars))
     for t in range(S.shape[0]):
-        _fill_powers(S[t], powers)
-        _derivatives(powers, exponents, S.shape[1], derivatives[t])
+        _fill_monomials(spec, S[t], work)
+        _fill_derivatives(spec, work)
+        for k in range(n_monomials):
+            for i in range(n_vars):
+                derivatives[t, k, i] = work[o_out + k * n_vars + i]
     return derivatives
 
 
-def _as_points(S, exponents):
-    exponents = np.ascontiguousarray(exponents, dtype=np.int64)
-    return np.ascontiguousarray(S, dtype=np.float64), exponents, _max_degree(exponents)
+def _as_points(S, exponents, n_diff):
+    S = np.ascontiguousarray(S, dtype=np.float64)
+    spec = _monomial_spec(exponents, n_diff)
+    return S, spec, np.empty(_work_size(spec))
 
 
 def evaluate_monomials(S, exponents):
@@ -251,7 +301,7 @@ def evaluate_monomials(S, exponents):
     -------
     values : ndarray of shape (n_samples, n_terms)
     """
-    return _batch_values(*_as_points(S, exponents))
+    return _batch_values(*_as_points(S, exponents, 0))
 
 
 def monomial_jacobian(S, exponents):
@@ -270,74 +320,30 @@ def monomial_jacobian(S, exponents):
         ``jacobian[t, k, j]`` is the derivative of monomial k with respect
         to variable j at the point ``S[t]``.
     """
-    return _batch_derivatives(*_as_points(S, exponents))
+    S, spec, work = _as_points(S, exponents, np.shape(exponents)[1])
+    return _batch_derivatives(S, spec, work)
 
 
 # ------------------------------------------------------------------ the terms
-# spec = [n_vars, n_zeta, n_eta, max_degree, state exponents, output exponents]
-# work = [powers (n_vars x (max_degree + 1)), zeta, eta, dzeta (n_zeta x n),
-#         deta (n_eta x n)]
-# The compiled functions index these flat arrays directly: views made at
-# every sample would cost more than the arithmetic.
-_HEADER = 4
+# The terms' spec is the monomials' spec of [state exponents; output
+# exponents] (zeta first, then eta) followed by n_zeta; derivatives are taken
+# with respect to the states.
 
 
 @njit(cache=True)
-def _flat_powers(s, work, width):
-    for j in range(s.shape[0]):
-        base = j * width
-        work[base] = 1.0
-        for p in range(1, width):
-            work[base + p] = work[base + p - 1] * s[j]
-
-
-@njit(cache=True)
-def _flat_monomials(spec, o_exp, n_terms, n_vars, work, width, o_out):
-    for k in range(n_terms):
-        value = 1.0
-        row = o_exp + k * n_vars
-        for j in range(n_vars):
-            e = spec[row + j]
-            if e:
-                value *= work[j * width + e]
-        work[o_out + k] = value
-
-
-@njit(cache=True)
-def _flat_derivatives(spec, o_exp, n_terms, n_vars, n, work, width, o_out):
-    # work[o_out + k * n + i] = d monomial_k / d x_i
-    for k in range(n_terms):
-        row = o_exp + k * n_vars
-        for i in range(n):
-            e = spec[row + i]
-            value = 0.0
-            if e:
-                value = e * work[i * width + e - 1]
-                for j in range(n_vars):
-                    if j != i:
-                        ej = spec[row + j]
-                        if ej:
-                            value *= work[j * width + ej]
-            work[o_out + k * n + i] = value
-
-
-@njit(cache=True)
-def _layout(spec, n):
-    n_vars, n_zeta, n_eta = spec[0], spec[1], spec[2]
-    width = spec[3] + 1
-    o_zeta = n_vars * width
-    o_eta = o_zeta + n_zeta
-    o_dzeta = o_eta + n_eta
-    o_deta = o_dzeta + n_zeta * n
-    return n_vars, n_zeta, n_eta, width, o_zeta, o_eta, o_dzeta, o_deta
+def _offsets(spec):
+    """n_zeta and the offsets of the monomials and their derivatives in work."""
+    n_vars, n_monomials, width = spec[0], spec[1], spec[2]
+    o_values = n_vars * width
+    return spec[spec.shape[0] - 1], o_values, o_values + n_monomials
 
 
 @njit(EVALUATE, cache=True)
 def _evaluate(theta, spec, s, n, h, work):
-    n_vars, n_zeta, n_eta, width, o_zeta, o_eta, _, _ = _layout(spec, n)
-    _flat_powers(s, work, width)
-    _flat_monomials(spec, _HEADER, n_zeta, n_vars, work, width, o_zeta)
-    _flat_monomials(spec, _HEADER + n_zeta * n_vars, n_eta, n_vars, work, width, o_eta)
+    n_zeta, o_zeta, _ = _offsets(spec)
+    n_eta = spec[1] - n_zeta
+    o_eta = o_zeta + n_zeta
+    _fill_monomials(spec, s, work)
     o_f = n * n_zeta
     for i in range(n):
         acc = 0.0
@@ -353,10 +359,10 @@ def _evaluate(theta, spec, s, n, h, work):
 
 @njit(STATE_JACOBIAN, cache=True)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
-    n_vars, n_zeta, n_eta, width, _, _, o_dzeta, o_deta = _layout(spec, n)
-    _flat_derivatives(spec, _HEADER, n_zeta, n_vars, n, work, width, o_dzeta)
-    _flat_derivatives(spec, _HEADER + n_zeta * n_vars, n_eta, n_vars, n, work, width,
-                      o_deta)
+    n_zeta, _, o_dzeta = _offsets(spec)
+    n_eta = spec[1] - n_zeta
+    o_deta = o_dzeta + n_zeta * n
+    _fill_derivatives(spec, work)
     o_f = n * n_zeta
     for i in range(n):
         for j in range(n):
@@ -375,7 +381,9 @@ def _state_jacobian(theta, spec, s, n, dh_dx, work):
 @njit(PARAMETER_JACOBIAN, cache=True)
 def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
                         output_offset):
-    _, n_zeta, n_eta, _, o_zeta, o_eta, _, _ = _layout(spec, n)
+    n_zeta, o_zeta, _ = _offsets(spec)
+    n_eta = spec[1] - n_zeta
+    o_eta = o_zeta + n_zeta
     for i in range(n):
         for k in range(n_zeta):
             state_out[i, state_offset + i * n_zeta + k] += work[o_zeta + k]
@@ -407,10 +415,8 @@ class PolynomialTerms(Terms):
                           np.ascontiguousarray(output_exponents, dtype=np.int64))
         n_zeta, n_eta = (len(e) for e in self.exponents)
         n_vars = self.exponents[0].shape[1]
-        max_degree = _max_degree(np.vstack(self.exponents))
         self.blocks = [("E", (n_states, n_zeta)), ("F", (n_outputs, n_eta))]
-        self.spec = np.concatenate(
-            [[n_vars, n_zeta, n_eta, max_degree], *(e.ravel() for e in self.exponents)]
-        ).astype(np.int64)
-        self.work_size = n_vars * (max_degree + 1) + (n_zeta + n_eta) * (1 + n_states)
+        monomials = _monomial_spec(np.vstack(self.exponents).reshape(-1, n_vars), n_states)
+        self.spec = np.append(monomials, n_zeta)
+        self.work_size = _work_size(monomials)
         self.n_state_params = n_states * n_zeta
