@@ -206,6 +206,18 @@ def test_spectral_radius_gradient():
         np.testing.assert_allclose(gradient[:, i, j], fd, rtol=1e-5, atol=1e-7)
 
 
+def test_spectral_radius_of_a_subset_does_not_depend_on_the_stack():
+    # The stability penalty computes the radius only where it may exceed 1;
+    # those matrices must give what the whole stack gives them.
+    J = np.random.default_rng(1).standard_normal((40, 3, 3))
+    real = np.flatnonzero(np.all(np.linalg.eigvals(J).imag == 0, axis=1))
+    assert real.size and np.iscomplexobj(np.linalg.eigvals(J))
+    whole = spectral_radius(J)
+    alone = spectral_radius(J[real], complex_arithmetic=True)
+    np.testing.assert_array_equal(alone[0], whole[0][real])
+    np.testing.assert_array_equal(alone[1], whole[1][real])
+
+
 def test_restricted_problem():
     problem, theta = _problem()
     free = problem.model.linear_columns

@@ -136,12 +136,16 @@ def _frequency_rows(values, blocks, period, weights):
 
 
 # --------------------------------------------------------- stability penalty
-def spectral_radius(J):
+def spectral_radius(J, complex_arithmetic=False):
     """Spectral radius of each matrix of ``J`` and its derivative.
 
     Parameters
     ----------
     J : ndarray of shape (n_points, n, n)
+    complex_arithmetic : bool, default=False
+        Compute the eigenvectors' inverse in complex arithmetic even when every
+        eigenvalue is real (as a stack containing complex ones does), so that
+        the result does not depend on the other matrices of a stack.
 
     Returns
     -------
@@ -152,6 +156,8 @@ def spectral_radius(J):
         eigenvalue of largest modulus.
     """
     eigenvalues, right = np.linalg.eig(J)
+    if complex_arithmetic:
+        eigenvalues, right = eigenvalues.astype(complex), right.astype(complex)
     rows = np.arange(len(J))
     top = np.argmax(np.abs(eigenvalues), axis=1)
     largest = eigenvalues[rows, top]
@@ -169,6 +175,11 @@ def spectral_radius(J):
 # Gauss-Newton approximation in any case: the states' own dependence is left
 # out).
 _PENALTY_STEP = 1e-5
+
+# Margin below 1 of the spectral radius, computed without eigenvectors, under
+# which a point is known to be stable: far above the rounding differences of
+# the two LAPACK paths, even for a defective local Jacobian of a few states.
+_SCREEN_MARGIN = 1e-3
 
 
 class SimulationErrorProblem:
@@ -296,9 +307,10 @@ class SimulationErrorProblem:
         state map along the fitted trajectory. Their Jacobian holds the direct
         dependence on A and on the terms' parameters (by central differences
         in the states of the terms' parameter Jacobian, at the points where
-        the radius exceeds 1 only: elsewhere the rows are flat); the states' own dependence on the
-        parameters is neglected (a Gauss-Newton-type approximation: the cost
-        itself is exact, so every accepted step still lowers it).
+        the radius exceeds 1 only: elsewhere the rows are flat); the states' own
+        dependence on the parameters is neglected (a Gauss-Newton-type
+        approximation: the cost itself is exact, so every accepted step still
+        lowers it).
 
         None when the local Jacobians overflow along the trajectory: the state
         map is then as unstable as a divergence.
@@ -309,16 +321,23 @@ class SimulationErrorProblem:
         local = model.local_jacobians(theta, S)[:, :n]
         if not np.all(np.isfinite(local)):
             return None
-        radius, gradient = spectral_radius(local)
-        excess = np.maximum(radius - 1.0, 0.0)
+        # Eigenvalues without eigenvectors cost a third and differ from those
+        # with them by rounding only: a point whose radius is below
+        # 1 - _SCREEN_MARGIN without them has a zero row either way.
+        eigenvalues = np.linalg.eigvals(local)
+        near = np.flatnonzero(np.max(np.abs(eigenvalues), axis=1) > 1.0 - _SCREEN_MARGIN)
+        radius, gradient = spectral_radius(local[near], np.iscomplexobj(eigenvalues))
+        excess = np.zeros(len(S))
+        excess[near] = np.maximum(radius - 1.0, 0.0)
         weight = np.sqrt(self.stability_penalty * n_residuals / len(S))
         rows = weight * excess
         if not jacobian:
             return rows, None
         J = np.zeros((len(S), theta.size))
-        active = np.flatnonzero(excess > 0)
+        above = radius > 1.0
+        active = near[above]
         if active.size:
-            G = weight * gradient[active]
+            G = weight * gradient[above]
             J[active, : n * n] = G.reshape(active.size, -1)
             terms_state = model.terms_columns[: model.terms.n_state_params]
             J[np.ix_(active, terms_state)] = model.curvature_contraction(
