@@ -2,13 +2,16 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from _numeric import central_differences
 
 from sknlss import ChebyshevBasis, LegendreBasis, PolynomialBasis
 from sknlss._core._kernels import DIVERGENCE_BOUND
 from sknlss._core._model import StateSpaceModel
 from sknlss._core._multistart import fit_from, run_starts
-from sknlss._core._problem import SimulationErrorProblem, fit_rows, spectral_radius
+from sknlss._core._problem import (SimulationErrorProblem, fit_rows, screening_radius,
+                                   spectral_radius)
 from sknlss._core._sequences import steady_state_rows
 from sknlss._terms._branches import BranchTerms
 from sknlss._terms._network import NetworkTerms
@@ -216,6 +219,29 @@ def test_spectral_radius_of_a_subset_does_not_depend_on_the_stack():
     alone = spectral_radius(J[real], complex_arithmetic=True)
     np.testing.assert_array_equal(alone[0], whole[0][real])
     np.testing.assert_array_equal(alone[1], whole[1][real])
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 3), seed=st.integers(0, 2**32 - 1), scale=st.floats(1e-3, 1e3),
+       structure=st.sampled_from(["random", "triangular", "rotation", "double"]))
+def test_screening_radius_agrees_with_lapack(n, seed, scale, structure):
+    # The screen decides which points get eigenvectors and whether they are
+    # computed in complex arithmetic: both must be what eigvals would give.
+    rng = np.random.default_rng(seed)
+    J = scale * rng.standard_normal((25, n, n))
+    if structure == "triangular":
+        J = np.triu(J)
+    elif structure == "rotation" and n == 2:
+        angle = rng.uniform(0, np.pi, 25)
+        J = scale * np.stack([[np.cos(angle), -np.sin(angle)],
+                              [np.sin(angle), np.cos(angle)]]).transpose(2, 0, 1)
+    elif structure == "double" and n == 2:
+        # Jordan blocks perturbed by rounding: real or complex is LAPACK's call.
+        J = np.tile(scale * np.array([[1.0, 1.0], [-1e-17, 1.0]]), (25, 1, 1))
+    eigenvalues = np.linalg.eigvals(J)
+    radius, complex_stack = screening_radius(J)
+    np.testing.assert_allclose(radius, np.abs(eigenvalues).max(axis=1), rtol=1e-10)
+    assert complex_stack == np.iscomplexobj(eigenvalues)
 
 
 def test_restricted_problem():

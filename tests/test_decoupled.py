@@ -154,6 +154,8 @@ def test_several_starts_in_parallel_match_sequential(wiener_data):
                   max_iter=5, n_restarts=2, n_init=2, random_state=1)
     sequential = DecoupledPNLSS(**params).fit(u, y)
     parallel = DecoupledPNLSS(**params, n_jobs=2).fit(u, y)
+    # The PNLSS model's starts run on the same workers.
+    assert parallel.pnlss_.n_jobs == 2
     np.testing.assert_allclose(parallel.predict(u), sequential.predict(u))
     single = DecoupledPNLSS(**{**params, "n_init": 1}).fit(u, y)
     assert sequential.start_losses_.shape == (2,) and single.start_losses_.shape == (1,)

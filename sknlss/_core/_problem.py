@@ -170,6 +170,52 @@ def spectral_radius(J, complex_arithmetic=False):
     return radius, gradient
 
 
+# Relative size of a 2 x 2 matrix's discriminant under which its eigenvalues
+# count as nearly double: whether LAPACK returns them as a real or a complex
+# pair is then a rounding decision, which only LAPACK itself can make.
+_NEARLY_DOUBLE = 1e-8
+
+
+def screening_radius(J):
+    """Spectral radius of each matrix of ``J``, without eigenvectors, and whether
+    LAPACK's eigenvalues of the whole stack are complex.
+
+    The 1 x 1 and 2 x 2 cases (the most common state dimensions, on the longest
+    records) are solved in closed form, unless a 2 x 2 matrix has a nearly
+    double eigenvalue; the others through ``numpy.linalg.eigvals``.
+
+    Parameters
+    ----------
+    J : ndarray of shape (n_points, n, n)
+
+    Returns
+    -------
+    radius : ndarray of shape (n_points,)
+    complex_stack : bool
+        Whether ``numpy.linalg.eigvals(J)`` is complex (some matrix has a
+        complex pair): see ``complex_arithmetic`` of :func:`spectral_radius`.
+    """
+    n = J.shape[1]
+    if n == 1:
+        return np.abs(J[:, 0, 0]), False
+    if n == 2:
+        half_trace = 0.5 * (J[:, 0, 0] + J[:, 1, 1])
+        half_gap = 0.5 * (J[:, 0, 0] - J[:, 1, 1])
+        coupling = J[:, 0, 1] * J[:, 1, 0]
+        # The discriminant (half_trace**2 - det), without its cancellation.
+        discriminant = half_gap**2 + coupling
+        nearly_double = ((coupling < 0.0)
+                         & (np.abs(discriminant) <= _NEARLY_DOUBLE * (half_gap**2 - coupling)))
+        if not np.any(nearly_double):
+            pair = discriminant < 0.0
+            root = np.sqrt(np.abs(discriminant))
+            radius = np.where(pair, np.sqrt(half_trace**2 + root**2),
+                              np.abs(half_trace) + root)
+            return radius, bool(np.any(pair))
+    eigenvalues = np.linalg.eigvals(J)
+    return np.max(np.abs(eigenvalues), axis=1), np.iscomplexobj(eigenvalues)
+
+
 # Step in the (normalised) states of the central differences that give the
 # penalty's dependence on the terms' parameters (the penalty's Jacobian is a
 # Gauss-Newton approximation in any case: the states' own dependence is left
@@ -321,12 +367,12 @@ class SimulationErrorProblem:
         local = model.local_jacobians(theta, S)[:, :n]
         if not np.all(np.isfinite(local)):
             return None
-        # Eigenvalues without eigenvectors cost a third and differ from those
-        # with them by rounding only: a point whose radius is below
+        # The radius without eigenvectors costs far less and differs from the
+        # one with them by rounding only: a point whose radius is below
         # 1 - _SCREEN_MARGIN without them has a zero row either way.
-        eigenvalues = np.linalg.eigvals(local)
-        near = np.flatnonzero(np.max(np.abs(eigenvalues), axis=1) > 1.0 - _SCREEN_MARGIN)
-        radius, gradient = spectral_radius(local[near], np.iscomplexobj(eigenvalues))
+        screened, complex_stack = screening_radius(local)
+        near = np.flatnonzero(screened > 1.0 - _SCREEN_MARGIN)
+        radius, gradient = spectral_radius(local[near], complex_stack)
         excess = np.zeros(len(S))
         excess[near] = np.maximum(radius - 1.0, 0.0)
         weight = np.sqrt(self.stability_penalty * n_residuals / len(S))

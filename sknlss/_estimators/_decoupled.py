@@ -30,7 +30,7 @@ _SHRINK_FACTORS = (1.0, 0.5, 0.25, 0.1, 0.01, 0.0)
 
 # The PNLSS settings that the decoupled model passes on to its PNLSS model.
 _FORWARDED = ("n_states", "estimate_x0", "period", "cost", "validation_fraction",
-              "n_transient", "random_state")
+              "n_transient", "n_jobs", "random_state")
 
 
 def _stack_polynomials(E, state_exponents, F, output_exponents):
@@ -117,9 +117,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
         ``n_states``, ``estimate_x0``, ``period``, ``cost``,
-        ``validation_fraction``, ``n_transient`` and ``random_state`` from this
-        estimator, and
-        its normalisation of the signals (``center``) is used by the decoupled
+        ``validation_fraction``, ``n_transient``, ``n_jobs`` and
+        ``random_state`` from this estimator, and its normalisation of the signals (``center``) is used by the decoupled
         model too. Its own hyperparameters are tunable as ``pnlss__degree``
         and so on. ``None`` uses ``PNLSSRegressor()``.
     period : int, default=None
@@ -169,7 +168,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         on the held-out end is kept, unless the PNLSS model's linear part does
         better there (it is then kept instead, see ``fell_back_to_linear_``).
     n_jobs : int or None, default=None
-        Number of joblib workers for the starts.
+        Number of joblib workers for the starts (of the PNLSS model too).
     random_state : int, RandomState instance or None, default=None
         Seeds the sampling points and the CPD initialisations.
     n_transient : int, default=0
