@@ -236,8 +236,11 @@ def test_screening_radius_agrees_with_lapack(n, seed, scale, structure):
         J = scale * np.stack([[np.cos(angle), -np.sin(angle)],
                               [np.sin(angle), np.cos(angle)]]).transpose(2, 0, 1)
     elif structure == "double" and n == 2:
-        # Jordan blocks perturbed by rounding: real or complex is LAPACK's call.
-        J = np.tile(scale * np.array([[1.0, 1.0], [-1e-17, 1.0]]), (25, 1, 1))
+        # A double eigenvalue moved by a few ulps, where the discriminant
+        # cancels: whether the pair is real or complex is LAPACK's call.
+        ulps = rng.integers(-4, 5, 25) * np.finfo(float).eps
+        J = scale * np.stack([np.full(25, 1.5), np.ones(25), -0.0625 * (1 + ulps),
+                              np.ones(25)], axis=1).reshape(25, 2, 2)
     eigenvalues = np.linalg.eigvals(J)
     radius, complex_stack = screening_radius(J)
     np.testing.assert_allclose(radius, np.abs(eigenvalues).max(axis=1), rtol=1e-10)
