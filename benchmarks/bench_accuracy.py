@@ -19,9 +19,10 @@ It prints, per benchmark, estimator and test record, the median, minimum and
 maximum of the errors and the median fit time, and writes them to
 ``--output`` as CSV and Markdown, with every fit as it finishes (JSON lines).
 A diverging simulation counts as an infinite error. The benchmarks are the
-measured records: a missing data file stops the run. The BLAS thread setting
-is printed with the results: run the script with ``OPENBLAS_NUM_THREADS=1`` and
-``=2``, then ``--compare`` the two runs files.
+measured records: a missing data file stops the run. The BLAS setting is
+printed with the results and names the files: run the script with
+``OPENBLAS_NUM_THREADS=1`` and ``=2`` (or with another ``OPENBLAS_CORETYPE``,
+whose kernels round differently), then ``--compare`` the two runs files.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_accuracy.py --output doc/_generated``
 (about an hour on 2 cores; ``--benchmarks`` and ``--random-states`` narrow it).
@@ -134,9 +135,18 @@ def _summary(runs, found):
     return lines
 
 
+def _blas_setting():
+    """The BLAS setting of this run, as it ends the output files' names."""
+    setting = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    core_type = os.environ.get("OPENBLAS_CORETYPE")
+    return f"{setting}_{core_type}" if core_type else setting
+
+
 def _markdown(summary, setting):
-    text = [f"BLAS threads: {setting}; {platform.machine()}, Python {platform.python_version()}",
-            ""]
+    threads, _, core_type = setting.partition("_")
+    described = f"BLAS threads: {threads}" + (f", OpenBLAS core type {core_type}"
+                                               if core_type else "")
+    text = [f"{described}; {platform.machine()}, Python {platform.python_version()}", ""]
     for benchmark in dict.fromkeys(s["benchmark"] for s in summary):
         rows = [s for s in summary if s["benchmark"] == benchmark]
         records = list(dict.fromkeys(s["record"] for s in rows))
@@ -181,7 +191,8 @@ def _read_runs(path):
 
 
 def _compare(first, second):
-    """Medians of two runs over the fits they share, with their relative change."""
+    """Medians of two runs over the fits they share, with their relative change,
+    and the largest relative change of a single fit."""
     a, b = _read_runs(first), _read_runs(second)
     shared = sorted(a.keys() & b.keys())
     rows = []
@@ -192,9 +203,12 @@ def _compare(first, second):
             median_a = float(np.median([a[key][name] for key in keys]))
             median_b = float(np.median([b[key][name] for key in keys]))
             change = abs(median_b - median_a) / median_a if np.isfinite(median_a) else np.nan
+            with np.errstate(invalid="ignore"):
+                fits = [abs(b[key][name] - a[key][name]) / a[key][name] for key in keys]
             rows.append({"benchmark": benchmark, "model": model, "record": name,
                          "random states": len(keys), "median (1st)": median_a,
-                         "median (2nd)": median_b, "relative change": change})
+                         "median (2nd)": median_b, "relative change": change,
+                         "largest change of one fit": float(np.nanmax(fits))})
     return rows
 
 
@@ -211,7 +225,8 @@ def main():
                              "runs (JSON lines, written as the fits finish)")
     parser.add_argument("--compare", nargs=2, metavar="RUNS", default=None,
                         help="instead of fitting, compare the medians of two runs "
-                             "(their *_runs.jsonl files) over the fits they share")
+                             "(their *_runs.jsonl files) over the fits they share; "
+                             "with --output, written as <second run>_compare.csv")
     parser.add_argument("--summarize", metavar="RUNS", default=None,
                         help="instead of fitting, summarise a runs file (e.g. of an "
                              "interrupted run) into the tables")
@@ -226,9 +241,10 @@ def main():
             print("  ".join(f"{v:.4g}" if isinstance(v, float) else str(v)
                             for v in row.values()))
         if args.output:
-            _write_csv(Path(args.output) / "bench_accuracy_threads_compare.csv", rows)
+            second = Path(args.compare[1]).name.removesuffix("_runs.jsonl")
+            _write_csv(Path(args.output) / f"{second}_compare.csv", rows)
         return
-    setting = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    setting = _blas_setting()
     found = _benchmarks(args.benchmarks, args.data_home)
     jobs = [(benchmark, label, seed, data, factory, records, scale)
             for benchmark, (data, models, records, scale, _) in found.items()
