@@ -208,10 +208,10 @@ def screening_radius(J):
                          & (np.abs(discriminant) <= _NEARLY_DOUBLE * (half_gap**2 - coupling)))
         if not np.any(nearly_double):
             pair = discriminant < 0.0
-            # A complex pair has modulus sqrt(det); real eigenvalues
-            # half_trace +- sqrt(discriminant).
-            radius = np.where(pair, np.sqrt(half_trace**2 - discriminant),
-                              np.abs(half_trace) + np.sqrt(np.abs(discriminant)))
+            # Eigenvalues half_trace +- root, real or (with a complex pair)
+            # half_trace +- i root.
+            root = np.sqrt(np.abs(discriminant))
+            radius = np.where(pair, np.hypot(half_trace, root), np.abs(half_trace) + root)
             return radius, bool(np.any(pair))
     eigenvalues = np.linalg.eigvals(J)
     return np.max(np.abs(eigenvalues), axis=1), np.iscomplexobj(eigenvalues)
