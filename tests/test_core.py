@@ -259,6 +259,29 @@ def test_restricted_problem():
     assert restricted.validation_loss is None
 
 
+@pytest.mark.parametrize("jacobian", [True, False])
+def test_validation_loss_reuses_only_the_same_iterate(jacobian):
+    model, theta = _model("polynomial", DIMS["SISO"], seed=7)
+    U = 0.5 * np.random.default_rng(8).standard_normal((80, 1))
+    starts = np.array([0, 80])
+    Y = model.simulate(theta, U, starts)[0] + 0.01 * np.random.default_rng(9).normal(size=U.shape)
+    problem = SimulationErrorProblem(model, fit_rows(U, Y, starts, n_transient=0,
+                                                     validation_fraction=0.3))
+
+    def fresh_loss(th):
+        Y_model = model.simulate(th, U, starts)[0]
+        return np.mean((Y_model[problem.val_rows] - Y[problem.val_rows]) ** 2)
+
+    other = theta.copy()
+    other[model.columns("A")] *= 0.9
+    problem.residual(theta, jacobian)
+    assert problem.validation_loss(theta) == fresh_loss(theta)
+    assert problem.validation_loss(other) == fresh_loss(other)
+    problem.residual(other, jacobian)
+    assert problem.validation_loss(theta) == fresh_loss(theta)
+    assert fresh_loss(theta) != fresh_loss(other)
+
+
 def test_fit_from_skips_candidates_that_diverge():
     problem, theta = _problem()
     exploding = theta.copy()

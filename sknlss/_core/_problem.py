@@ -288,6 +288,11 @@ class SimulationErrorProblem:
                                           self.weights).ravel()
         self.validation_loss = self._validation_loss if self.val_rows.any() else None
         self.decay_scale = None
+        # (theta, outputs, diverged) of the last residual: the optimiser asks
+        # for the held-out loss of the iterate whose residual it has just
+        # computed, and the same simulation serves both. It is replaced as a
+        # whole, so that concurrent callers can at worst miss it.
+        self._last_simulation = None
 
     # ----------------------------------------------------------- simulation
     def simulate(self, theta):
@@ -321,6 +326,7 @@ class SimulationErrorProblem:
         else:
             Y_model, X, diverged = self.simulate(theta)
             J = None
+        self._last_simulation = (theta.copy(), Y_model, diverged)
         if diverged:
             return None, None
         Y_fit = Y_model[self.fit_rows]
@@ -414,7 +420,11 @@ class SimulationErrorProblem:
         return _Restricted(self, theta, free)
 
     def _validation_loss(self, theta):
-        Y_model, _, diverged = self.simulate(theta)
+        last = self._last_simulation
+        if last is not None and np.array_equal(last[0], theta):
+            _, Y_model, diverged = last
+        else:
+            Y_model, _, diverged = self.simulate(theta)
         if diverged:
             return np.inf
         return float(np.mean((Y_model[self.val_rows] - self.Y[self.val_rows]) ** 2))
