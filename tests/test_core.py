@@ -60,12 +60,16 @@ def test_jacobian_matches_central_differences(terms, dims, estimate_x0):
     # Rows outside the cost (here every fifth) are not stored.
     kept = np.arange(len(U)) % 5 != 0
     rows = np.where(kept, np.cumsum(kept) - 1, -1)
-    Y, X, J, diverged = model.sensitivities(theta, U, starts, rows)
+    Y, X, J, local, diverged = model.sensitivities(theta, U, starts, rows, with_local=True)
     assert not diverged
     Y_sim, X_sim, diverged = model.simulate(theta, U, starts)
     assert not diverged
     np.testing.assert_array_equal(Y, Y_sim)
     np.testing.assert_array_equal(X, X_sim)
+    # The stability penalty takes these for those of local_jacobians.
+    S = np.hstack([X, U])[kept]
+    np.testing.assert_array_equal(local, model.local_jacobians(theta, S)[:, : dims[0]])
+    assert model.sensitivities(theta, U, starts, rows)[3].shape == (0, dims[0], dims[0])
     assert J.shape == (kept.sum(), dims[2], model.n_params)
     J_fd = central_differences(lambda th: model.simulate(th, U, starts)[0], theta)[kept]
     scale = np.abs(J_fd).max()
@@ -129,7 +133,7 @@ def test_divergence_rule_on_states_and_outputs():
     assert np.all(np.isfinite(Y[:5])) and np.isnan(Y[99]) and np.isnan(X[199, 0])
     first = np.flatnonzero(np.isnan(Y[:100, 0]))[0]
     assert np.all(np.abs(X[first - 1]) <= DIVERGENCE_BOUND)
-    assert model.sensitivities(theta, U, starts, np.arange(200))[3]
+    assert model.sensitivities(theta, U, starts, np.arange(200))[4]
     # An output that leaves the bound at the last sample (the state stays
     # bounded) is divergence as well.
     feedthrough = model.pack({"A": np.zeros((2, 2)), "B": np.zeros((2, 1)),

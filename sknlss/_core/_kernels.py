@@ -213,15 +213,15 @@ def simulate(theta, n_outputs, n_terms, spec, work_size, U, starts, x0, evaluate
 
 
 @njit(
-    types.Tuple((_F2, _F2, _F3, types.boolean))(
-        _F1, _INT, _INT, _INT, _I1, _INT, _F2, _I1, _F2, types.boolean, _I1,
+    types.Tuple((_F2, _F2, _F3, _F3, types.boolean))(
+        _F1, _INT, _INT, _INT, _I1, _INT, _F2, _I1, _F2, types.boolean, _I1, types.boolean,
         types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
         types.FunctionType(PARAMETER_JACOBIAN),
     ),
     cache=True,
 )
 def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, starts,
-                  x0, estimate_x0, jacobian_rows, evaluate, state_jacobian,
+                  x0, estimate_x0, jacobian_rows, with_local, evaluate, state_jacobian,
                   parameter_jacobian):
     """Simulated outputs and states, and the outputs' Jacobian with respect to theta.
 
@@ -237,6 +237,9 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
         Row of ``J`` receiving the derivatives of sample t, or -1 to skip the
         sample (e.g. a transient outside the cost): only the rows the cost
         needs are stored.
+    with_local : bool
+        Also return the local Jacobians of the state map on those rows (the
+        stability penalty needs them, and they are computed here anyway).
     state_jacobian, parameter_jacobian : compiled functions
         The terms' other two functions.
 
@@ -245,6 +248,9 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
     Y : ndarray of shape (n_samples, n_outputs)
     X : ndarray of shape (n_samples, n_states)
     J : ndarray of shape (max(jacobian_rows) + 1, n_outputs, n_params)
+    local : ndarray of shape (max(jacobian_rows) + 1, n_states, n_states)
+        ``A + dh_x/dx`` on the rows of J, as :func:`local_jacobians` gives it
+        (no rows without ``with_local``).
     diverged : bool
         When True, ``Y``, ``X`` and ``J`` are incomplete and must not be used.
     """
@@ -277,6 +283,7 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
     for t in range(n_samples):
         n_rows = max(n_rows, jacobian_rows[t] + 1)
     J = np.zeros((n_rows, n_y, n_params))
+    local = np.empty((n_rows if with_local else 0, n, n))
     unused_rows = np.zeros((n_y, n_params))
     # As in simulate, s = [x; u] holds the current state.
     s = np.empty(n + n_u)
@@ -294,7 +301,7 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
             current[i, n_moving - n_x0 + i] = 1.0
         for t in range(starts[seq], starts[seq + 1]):
             if _escaped(s, n, DIVERGENCE_BOUND):
-                return Y, X, J, True
+                return Y, X, J, local, True
             for j in range(n_u):
                 s[n + j] = U[t, j]
             evaluate(theta_terms, spec, s, n, h, work)
@@ -316,7 +323,7 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
                 if not abs(acc) <= DIVERGENCE_BOUND:
                     failed = True
             if failed:
-                return Y, X, J, True
+                return Y, X, J, local, True
             for i in range(n):
                 X[t, i] = s[i]
             # Local Jacobians of [x(t+1); y(t)] with respect to x(t): [A; C] + dh/dx.
@@ -356,10 +363,14 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
                         out[i, o_d + i * n_u + j] += s[n + j]
                 parameter_jacobian(theta_terms, spec, s, n, work, following, o_c, out,
                                    o_terms)
+                if with_local:
+                    for i in range(n):
+                        for j in range(n):
+                            local[row, i, j] = M[i, j]
             for i in range(n):
                 s[i] = x_next[i]
             current, following = following, current
-    return Y, X, J, False
+    return Y, X, J, local, False
 
 
 @njit(

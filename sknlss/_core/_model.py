@@ -156,15 +156,16 @@ class StateSpaceModel:
             self.initial_states(theta, len(starts) - 1, x0), _pointers(terms)[0],
         )
 
-    def sensitivities(self, theta, U, starts, jacobian_rows, x0=None):
-        """Outputs, states, the outputs' Jacobian on ``jacobian_rows`` and the
+    def sensitivities(self, theta, U, starts, jacobian_rows, x0=None, *, with_local=False):
+        """Outputs, states, the outputs' Jacobian on ``jacobian_rows``, the state
+        map's local Jacobians there (with ``with_local``, else no rows) and the
         divergence flag (see :func:`sknlss._core._kernels.sensitivities`)."""
         terms = self.terms
         return _kernels.sensitivities(
             _array(theta), self.n_outputs, self.n_terms,
             terms.n_state_params, _array(terms.spec, np.int64), terms.work_size, *_contiguous(U, starts),
             self.initial_states(theta, len(starts) - 1, x0), self.estimate_x0,
-            _array(jacobian_rows, np.int64), *_pointers(terms),
+            _array(jacobian_rows, np.int64), with_local, *_pointers(terms),
         )
 
     def local_jacobians(self, theta, S):

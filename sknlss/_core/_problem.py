@@ -320,9 +320,11 @@ class SimulationErrorProblem:
         """Residual vector and (when ``jacobian``) its Jacobian; ``(None, None)``
         when the simulation diverges."""
         model = self.model
+        local = None
         if jacobian:
-            Y_model, X, J, diverged = model.sensitivities(
-                theta, self.U, self.starts, self.jacobian_rows, self.x0)
+            Y_model, X, J, local, diverged = model.sensitivities(
+                theta, self.U, self.starts, self.jacobian_rows, self.x0,
+                with_local=bool(self.stability_penalty))
         else:
             Y_model, X, diverged = self.simulate(theta)
             J = None
@@ -341,7 +343,7 @@ class SimulationErrorProblem:
             J = J.reshape(r.size, -1)
         extra = []
         if self.stability_penalty:
-            stability = self._stability_rows(theta, X, r.size, jacobian)
+            stability = self._stability_rows(theta, X, r.size, jacobian, local)
             if stability is None:
                 return None, None
             extra.append(stability)
@@ -353,7 +355,7 @@ class SimulationErrorProblem:
                 J = np.vstack([J] + [rows for _, rows in extra])
         return r, J
 
-    def _stability_rows(self, theta, X, n_residuals, jacobian):
+    def _stability_rows(self, theta, X, n_residuals, jacobian, local=None):
         """Rows of the stability penalty and their Jacobian.
 
         The rows are the excess over 1 of the local spectral radius of the
@@ -366,12 +368,15 @@ class SimulationErrorProblem:
         lowers it).
 
         None when the local Jacobians overflow along the trajectory: the state
-        map is then as unstable as a divergence.
+        map is then as unstable as a divergence. ``local``, when given, holds
+        the state map's local Jacobians at the fitted points (from the
+        sensitivities).
         """
         model = self.model
         n = model.n_states
         S = self._fitted_points(X)
-        local = model.local_jacobians(theta, S)[:, :n]
+        if local is None:
+            local = model.local_jacobians(theta, S)[:, :n]
         if not np.all(np.isfinite(local)):
             return None
         # The radius without eigenvectors costs far less and differs from the
