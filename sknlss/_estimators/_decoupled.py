@@ -119,8 +119,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``n_states``, ``estimate_x0``, ``period``, ``cost``,
         ``validation_fraction``, ``n_transient``, ``n_jobs`` and
         ``random_state`` from this estimator, and its normalisation of the
-        signals (``center``) is used by the decoupled model too. Its own hyperparameters are tunable as ``pnlss__degree``
-        and so on. ``None`` uses ``PNLSSRegressor()``.
+        signals (``center``) is used by the decoupled model too. Its own
+        hyperparameters are tunable as ``pnlss__degree`` and so on. ``None``
+        uses ``PNLSSRegressor()``.
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
