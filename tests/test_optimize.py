@@ -5,7 +5,7 @@ import pytest
 from sklearn.exceptions import ConvergenceWarning
 
 from sknlss import DecoupledPNLSS, NLSS2Regressor, PNLSSRegressor
-from sknlss._core._optimize import levenberg_marquardt
+from sknlss._core._optimize import _scaled_step_factors, levenberg_marquardt
 
 
 def _rosenbrock(theta, jacobian):
@@ -27,6 +27,24 @@ def test_minimises_a_nonlinear_least_squares_problem():
     assert result.converged and not result.stopped_early
     assert np.all(np.diff(result.loss_history) < 0)
     assert result.best_iter == result.n_iter
+
+
+def _damped_step(J, r, damping):
+    s, Vt, col_scale, projected = _scaled_step_factors(J, r)
+    return -(Vt.T @ (s / (s**2 + damping**2) * projected)) / col_scale
+
+
+def test_zero_rows_leave_the_step_unchanged():
+    # An inactive penalty adds rows that are zero in J and r; they are left
+    # out of the factorisation, and the step must not notice.
+    rng = np.random.default_rng(0)
+    J, r = rng.standard_normal((40, 6)), rng.standard_normal(40)
+    padded_J, padded_r = np.zeros((100, 6)), np.zeros(100)
+    rows = np.sort(rng.choice(100, size=40, replace=False))
+    padded_J[rows], padded_r[rows] = J, r
+    for damping in (1e-3, 1.0, 10.0):
+        np.testing.assert_allclose(_damped_step(padded_J, padded_r, damping),
+                                   _damped_step(J, r, damping), rtol=1e-12, atol=1e-14)
 
 
 def test_iteration_limit_warns():

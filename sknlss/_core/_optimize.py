@@ -82,10 +82,16 @@ def _scaled_step_factors(J, r):
     projected : ndarray of shape (k,)
         ``U.T @ r``.
     """
-    m, p = J.shape
+    p = J.shape[1]
     col_scale = np.sqrt(np.einsum("ij,ij->j", J, J))
     col_scale[col_scale == 0.0] = 1.0
-    augmented = np.empty((m, p + 1), order="F")
+    # Rows that are zero in J and r (a penalty that is inactive at most
+    # samples) change neither factor; leaving them out of the QR, whose cost
+    # grows with the rows, spares most of the work of penalised problems.
+    kept = (r != 0.0) | np.any(J != 0.0, axis=1)
+    if not kept.all():
+        J, r = J[kept], r[kept]
+    augmented = np.empty((r.size, p + 1), order="F")
     np.divide(J, col_scale, out=augmented[:, :p])
     augmented[:, p] = r
     # mode="raw" returns the economic triangular factor; "r" would pad it with
