@@ -47,6 +47,14 @@ def test_zero_rows_leave_the_step_unchanged():
                                    _damped_step(J, r, damping), rtol=1e-12, atol=1e-14)
 
 
+def test_a_flat_zero_problem_stops_without_a_step():
+    result = levenberg_marquardt(
+        lambda theta, jacobian: (np.zeros(5), np.zeros((5, 2)) if jacobian else None),
+        np.ones(2), max_iter=3)
+    assert result.converged and result.n_iter == 0
+    np.testing.assert_array_equal(result.theta, np.ones(2))
+
+
 def test_iteration_limit_warns():
     with pytest.warns(ConvergenceWarning, match="max_iter=2"):
         result = levenberg_marquardt(_rosenbrock, np.array([-1.2, 1.0]), max_iter=2)

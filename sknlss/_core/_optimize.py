@@ -89,7 +89,7 @@ def _scaled_step_factors(J, r):
     # samples) change neither factor; leaving them out of the QR, whose cost
     # grows with the rows, spares most of the work of penalised problems.
     kept = (r != 0.0) | np.any(J != 0.0, axis=1)
-    if not kept.all():
+    if kept.any() and not kept.all():
         J, r = J[kept], r[kept]
     augmented = np.empty((r.size, p + 1), order="F")
     np.divide(J, col_scale, out=augmented[:, :p])
@@ -207,6 +207,11 @@ def levenberg_marquardt(
                 converged = True
                 break
             s, Vt, col_scale, projected = _scaled_step_factors(J, r)
+            if s[0] == 0.0:
+                # The residual does not depend on the parameters here: no
+                # step can lower the cost.
+                converged = True
+                break
             rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps))
             rank = max(1, min(rank, s.size - n_drop))
             s, Vt, projected = s[:rank], Vt[:rank], projected[:rank]
