@@ -102,6 +102,11 @@ def _scaled_step_factors(J, r):
     return s, Vt, col_scale, Ur.T @ R[:, p]
 
 
+def _damped_step(s, Vt, col_scale, projected, damping):
+    """Levenberg-Marquardt step for the factors of :func:`_scaled_step_factors`."""
+    return -(Vt.T @ (s / (s**2 + damping**2) * projected)) / col_scale
+
+
 def warn_if_still_improving(label, max_iter, losses, validation):
     """ConvergenceWarning when the iteration limit stopped a search that was
     still improving: the held-out loss reached a new best in the last tenth of
@@ -218,7 +223,7 @@ def levenberg_marquardt(
             if damping is None:
                 damping = s[0]
             for _ in range(_MAX_REJECTED):
-                step = -(Vt.T @ (s / (s**2 + damping**2) * projected)) / col_scale
+                step = _damped_step(s, Vt, col_scale, projected, damping)
                 candidate = theta + step
                 r_new = _finite_residual(residual, candidate)
                 if r_new is not None and r_new @ r_new < cost:
