@@ -1,5 +1,7 @@
-"""Every public docstring documents exactly the parameters of its signature, in order."""
+"""Every public docstring documents exactly the parameters of its signature, in
+order, and its Examples run and print what they show."""
 
+import doctest
 import importlib
 import inspect
 from pathlib import Path
@@ -122,6 +124,34 @@ def test_parameters_section_matches_signature(qualified, obj):
     assert documented == expected, (
         f"{qualified}: the Parameters section lists {documented}, the signature has {expected}"
     )
+
+
+def _example_tests():
+    """The doctests of the public objects' docstrings, each found once."""
+    finder, found = doctest.DocTestFinder(recurse=False), {}
+    for qualified, obj in OBJECTS:
+        for test in finder.find(obj, qualified, globs={}):
+            if test.examples and test.lineno is not None:
+                found.setdefault((test.filename, test.lineno), test)
+    return sorted(found.values(), key=lambda test: test.name)
+
+
+EXAMPLES = _example_tests()
+
+
+def test_examples_are_found():
+    names = {test.name for test in EXAMPLES}
+    assert {"sknlss.PNLSSRegressor", "sknlss.NLLFRRegressor",
+            "sknlss.decouple_polynomial"} <= names
+
+
+@pytest.mark.parametrize("test", EXAMPLES, ids=[test.name for test in EXAMPLES])
+def test_examples_run(test):
+    pytest.importorskip("matplotlib").use("Agg")
+    report = []
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    result = runner.run(test, out=report.append)
+    assert result.failed == 0, "".join(report)
 
 
 def test_api_reference_lists_every_public_name():

@@ -86,3 +86,30 @@ def test_bad_basis(basis, message, records):
     u, y, _, _ = records
     with pytest.raises(ValueError, match=message):
         NLLFRRegressor(n_states=2, basis=basis).fit(u, y)
+
+
+def test_default_bases_take_the_starts_in_turn(records):
+    # Each default basis gets the first starts (seeds and held-out shares) it
+    # would get alone, and the fit keeps the best of all of them. One share
+    # for all starts: the linear start is fitted before the largest held-out
+    # end, which otherwise depends on the number of starts.
+    u, y, _, _ = records
+    options = dict(n_states=2, max_iter=5, random_state=0, validation_fraction=0.3)
+    both = NLLFRRegressor(n_init=5, **options).fit(u, y)
+    powers = NLLFRRegressor(basis=PolynomialBasis(3), n_init=3, **options).fit(u, y)
+    legendre = NLLFRRegressor(basis=LegendreBasis(3), n_init=2, **options).fit(u, y)
+    np.testing.assert_allclose(both.start_losses_[0::2], powers.start_losses_, rtol=1e-12)
+    np.testing.assert_allclose(both.start_losses_[1::2], legendre.start_losses_, rtol=1e-12)
+    best = int(np.argmin(both.start_losses_))
+    kept = (powers, legendre)[best % 2]
+    assert both.basis_ == kept.basis_
+    assert both.n_params_ == kept.n_params_
+    assert both.coefficients_.shape == (1, both.basis_.n_functions)
+    np.testing.assert_allclose(both.predict(u), kept.predict(u), rtol=1e-10, atol=1e-12)
+
+
+def test_a_single_start_uses_the_powers(records):
+    u, y, _, _ = records
+    model = NLLFRRegressor(n_states=2, n_init=1, max_iter=3).fit(u, y)
+    assert model.basis_ == PolynomialBasis(3)
+    assert len(model.start_losses_) == 1

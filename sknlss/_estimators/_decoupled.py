@@ -89,7 +89,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     polyadic decomposition of their Jacobians in ``n_sampling_points`` points
     (Dreesen, Ishteva and Schoukens, SIMAX 2015), refined on the Jacobians and
     the values of the polynomials in the same points
-    (:func:`~sknlss._decouple.decouple_polynomial`), and finally re-optimises
+    (:func:`~sknlss.decouple_polynomial`), and finally re-optimises
     all parameters by Levenberg-Marquardt on the simulation error.
 
     The branches have no linear term: it would duplicate ``A, B, C, D``.
@@ -242,7 +242,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     See Also
     --------
     PNLSSRegressor : The coupled polynomial model decoupled here.
-    sknlss._decouple.decouple_polynomial : The decoupling step alone.
+    decouple_polynomial : The decoupling step alone.
 
     Notes
     -----
@@ -265,10 +265,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     >>> y = np.zeros(300)
     >>> x = 0.0
     >>> for t in range(300):
-    ...     y[t] = x + 0.2 * x**2
+    ...     y[t] = x + 0.1 * x**3
     ...     x = 0.5 * x + u[t, 0]
     >>> model = DecoupledPNLSS(
-    ...     n_states=1, rank=1, pnlss=PNLSSRegressor(degree=2, max_iter=20),
+    ...     n_states=1, rank=1, pnlss=PNLSSRegressor(degree=3, max_iter=20),
     ...     max_iter=20, random_state=0).fit(u, y)
     >>> bool(model.score(u, y) > 0.99)
     True

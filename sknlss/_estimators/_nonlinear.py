@@ -15,7 +15,9 @@ Every nonlinear estimator identifies ``x(t+1) = A x + B u + h_x(x, u)``,
    :class:`~sknlss._core._problem.SimulationErrorProblem`; the start with the
    lowest held-out loss is kept.
 
-A subclass provides its terms (``_make_terms``), its starting points
+A subclass provides its terms (``_make_terms``, or several candidate
+structures that the starts take in turn through ``_candidate_terms``), its
+starting points
 (``_prepare_starts`` and ``_starting_points``) and its fitted attributes
 (``_set_terms`` and ``_terms_values``).
 """
@@ -95,10 +97,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     def _make_terms(self, n_inputs, n_outputs):
         """The terms object of the model for the given dimensions."""
 
+    def _candidate_terms(self, n_inputs, n_outputs):
+        """The terms of the candidate structures: the starts take them in turn,
+        and the held-out loss chooses among all starts (one by default)."""
+        return [self._make_terms(n_inputs, n_outputs)]
+
     @abstractmethod
     def _n_terms_params(self, n_inputs, n_outputs):
-        """Number of parameters of the terms ``_make_terms`` would build,
-        counted without building them."""
+        """Number of parameters of the largest terms ``_candidate_terms`` would
+        build, counted without building them."""
 
     @abstractmethod
     def _starting_points(self, context, start, seed):
@@ -257,7 +264,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         (with a warning): the search could then fit the data exactly whatever
         the system, and its hold-out selection would rest on noise."""
         model = problem.model
-        n_values = int(problem.fit_rows.sum()) * model.n_outputs
+        n_values = n_cost_values(problem)
         if n_values >= model.n_params:
             return False
         warnings.warn(
@@ -279,18 +286,20 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         A, B, C, D, x0 = self._linear_start(U, Y, starts,
                                             bla_rows.fit_rows[bla_rows.original])
         self.fit_transient_ = self._cost_transient(A, starts)
-        model = StateSpaceModel(self.n_states, U.shape[1], Y.shape[1],
-                                self._make_terms(U.shape[1], Y.shape[1]),
-                                estimate_x0=self.estimate_x0)
-        problems = {share: SimulationErrorProblem(
-            model, fit_rows(U, Y, starts, n_transient=self.fit_transient_,
-                            validation_fraction=share, steady_state_period=self.period),
+        rows = {share: fit_rows(U, Y, starts, n_transient=self.fit_transient_,
+                                validation_fraction=share, steady_state_period=self.period)
+                for share in sorted(set(shares))}
+        problem_sets = [{share: SimulationErrorProblem(
+            StateSpaceModel(self.n_states, U.shape[1], Y.shape[1], terms,
+                            estimate_x0=self.estimate_x0),
+            rows[share],
             frequency_period=self.period if self.cost == "frequency" else None,
             stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
-        ) for share in sorted(set(shares))}
+        ) for share in rows} for terms in self._candidate_terms(U.shape[1], Y.shape[1])]
         # The problem with the largest hold-out serves the work shared by all
         # starts: it sees only rows that none of the starts selects on.
-        problem = problems[max(shares)]
+        problem = problem_sets[0][max(shares)]
+        model = problem.model
         values = {name: np.zeros(shape) for name, shape in model.blocks}
         values.update(A=A, B=B, C=C, D=D, x0=x0)
         theta = model.pack(values)
@@ -298,35 +307,53 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             theta_best, result = self._fit_linear_part(problem, theta)
             self.start_losses_, self.fell_back_to_linear_ = np.zeros(0), True
         else:
-            theta_best, result = self._search(problems, shares, theta, U, Y, starts)
+            # Further candidates with more parameters than cost values are left out.
+            problem_sets = problem_sets[:1] + [
+                problems for problems in problem_sets[1:]
+                if n_cost_values(problems[max(shares)]) >= problems[max(shares)].model.n_params
+            ]
+            model, theta_best, result = self._search(problem_sets, shares, theta, U, Y, starts)
         values = model.unpack(theta_best)
         self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
         self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
-        self._set_terms(values)
         # The structure the predictions simulate (the initial state is passed).
         self._model = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs,
                                       model.terms)
+        self._set_terms(values)
         self.n_params_ = int(model.n_params)
         self._set_search_result(result)
 
-    def _search(self, problems, shares, theta, U, Y, starts):
+    def _search(self, problem_sets, shares, theta, U, Y, starts):
         """The starts from the linear start ``theta``, each refined on the
-        problem of its hold-out share; the best on the common hold-out, unless
-        the linear start does better there."""
-        problem = problems[max(shares)]
-        model = problem.model
-        theta = self._refined_linear_start(problem, theta)
+        problem of its hold-out share; the model and parameters of the best on
+        the common hold-out, unless the linear start does better there.
+
+        Start ``i`` is start number ``j = i // k`` of candidate structure
+        ``i % k`` (of the ``k`` in ``problem_sets``), with the seed and the
+        hold-out share of start ``j``: each candidate gets the first starts it
+        would get alone.
+        """
+        theta = self._refined_linear_start(problem_sets[0][max(shares)], theta)
+        linear = problem_sets[0][max(shares)].model.unpack(theta)
         seeds = check_random_state(self.random_state).randint(
             np.iinfo(np.int32).max, size=self.n_init)
-        context = {"problem": problem, "model": model, "theta": theta, "U": U, "Y": Y,
-                   "starts": starts, "rows": problem.rows, "seeds": seeds}
-        self._prepare_starts(context)
-        options = self._lm_options(model)
+        contexts = []
+        for problems in problem_sets:
+            problem = problems[max(shares)]
+            context = {"problem": problem, "model": problem.model,
+                       "theta": _with_linear_part(problem.model, linear), "U": U, "Y": Y,
+                       "starts": starts, "rows": problem.rows, "seeds": seeds}
+            self._prepare_starts(context)
+            contexts.append(context)
+        n_candidates = len(problem_sets)
+        runs = [(i % n_candidates, i // n_candidates) for i in range(self.n_init)]
+        runs = [(c, j, shares[j], seeds[j]) for c, j in runs]
         outcomes = run_starts(
             _fit_start,
-            [(self, context, problems[share], i, seed,
-              f"{self._label} start {i}" if self.n_init > 1 else self._label, options)
-             for i, (share, seed) in enumerate(zip(shares, seeds))],
+            [(self, contexts[c], problem_sets[c][share], j, seed,
+              f"{self._label} start {i}" if self.n_init > 1 else self._label,
+              self._lm_options(contexts[c]["model"]))
+             for i, (c, j, share, seed) in enumerate(runs)],
             n_jobs=self.n_jobs,
         )
         failures = [outcome for outcome in outcomes if isinstance(outcome, Exception)]
@@ -334,14 +361,16 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             raise self._unfittable(failures[0]) from failures[0]
         # Every start is judged on the end that all of them held out; a start
         # that blows up on a larger copy of the estimation input is out.
-        common = problems[min(shares)]
+        common = [problems[min(shares)] for problems in problem_sets]
         losses = [np.inf if isinstance(outcome, Exception)
-                  or not stays_bounded(common, outcome[0]) else holdout_loss(common, outcome[0])
-                  for outcome in outcomes]
+                  or not stays_bounded(common[c], outcome[0])
+                  else holdout_loss(common[c], outcome[0])
+                  for (c, *_), outcome in zip(runs, outcomes)]
         best = int(np.argmin(losses))
         theta_best, result, start_warnings = outcomes[best]
+        c_best, j_best, _, seed_best = runs[best]
         self.start_losses_ = np.asarray(losses)
-        linear_loss = holdout_loss(common, theta)
+        linear_loss = holdout_loss(common[0], theta)
         # A nonlinear model that does worse than its linear start there is not
         # returned: the linear model is, and the attribute records it.
         self.linear_loss_ = linear_loss
@@ -351,14 +380,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                 print(f"{self._label}: no start beat the linear model on the held-out "
                       f"data ({losses[best]:.3g} against {linear_loss:.3g}); the linear "
                       "model is kept.")
-            theta_best = theta
-        else:
-            for message, category in start_warnings:
-                # Pointing at the caller of fit: _search, _fit_normalized, fit
-                # and its guard lie in between.
-                warnings.warn(message, category, stacklevel=5)
-        self._record_start(context, best, seeds[best])
-        return theta_best, result
+            return contexts[0]["model"], theta, result
+        for message, category in start_warnings:
+            # Pointing at the caller of fit: _search, _fit_normalized, fit
+            # and its guard lie in between.
+            warnings.warn(message, category, stacklevel=5)
+        self._record_start(contexts[c_best], j_best, seed_best)
+        return contexts[c_best]["model"], theta_best, result
 
     # ------------------------------------------------------------ simulation
     def _fitted_model(self):
@@ -389,6 +417,20 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
         candidates = estimator._starting_points(context, start, seed)
         theta, result = fit_from(problem, candidates, label=label, **options)
     return theta, result, [(warning.message, warning.category) for warning in caught]
+
+
+def _with_linear_part(model, linear):
+    """The parameters of ``model`` with the linear part (and x0) of the unpacked
+    ``linear`` and its terms switched off."""
+    values = {name: np.zeros(shape) for name, shape in model.blocks}
+    values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0")
+                  if name in values)
+    return model.pack(values)
+
+
+def n_cost_values(problem):
+    """Number of residual values of the simulation error (penalties aside)."""
+    return int(problem.fit_rows.sum()) * problem.model.n_outputs
 
 
 def stays_bounded(problem, theta):

@@ -295,7 +295,7 @@ def decouple_polynomial(
     Examples
     --------
     >>> import numpy as np
-    >>> from sknlss._decouple import decouple_polynomial
+    >>> from sknlss import decouple_polynomial
     >>> # f(s) = (s1 + s2)**2 = s1**2 + 2 s1 s2 + s2**2 has one branch.
     >>> V, W, c, error = decouple_polynomial(
     ...     [[1.0, 2.0, 1.0]], [[2, 0], [1, 1], [0, 2]], rank=1, random_state=0)
