@@ -102,10 +102,11 @@ if outside.size:
 # The branch input :math:`z = C_z x + D_z u` along the model's own simulation,
 # in the model's normalised coordinates (the states of ``simulate`` and the
 # input scaled by ``u_offset_`` and ``u_scale_``), and the fitted
-# :math:`w = f(z)` from ``coefficients_`` and the basis (``basis=None`` is
-# the polynomial basis of degree 3: powers 2 and 3).
+# :math:`w = f(z)` from ``coefficients_`` and the basis of the kept model,
+# ``basis_`` (with ``basis=None``, the held-out loss chose between the powers
+# 2 and 3 and the Legendre polynomials of degrees 1 to 3 of ``tanh(z)``).
 nllfr = models["NL-LFR"]
-basis = PolynomialBasis(3) if nllfr.basis is None else nllfr.basis
+basis = nllfr.basis_
 
 
 def branch_input(X):
@@ -118,7 +119,8 @@ z_est, z_test = branch_input(data.X_est), branch_input(test.X)
 low, high = z_est.min(), z_est.max()
 grid = np.linspace(min(low, z_test.min()), max(high, z_test.max()), 400)
 w = basis.evaluate(grid)[0] @ nllfr.coefficients_[0]
-print("f(z) = " + " + ".join(f"{c:.4g} z^{d}"
+term = "z^{}" if isinstance(basis, PolynomialBasis) else "P_{}(tanh z)"
+print("f(z) = " + " + ".join(f"{c:.4g} {term.format(d)}"
                              for c, d in zip(nllfr.coefficients_[0], basis.degrees)))
 print(f"z on the estimation record: {low:.3f} to {high:.3f}; "
       f"on '{record}': {z_test.min():.3f} to {z_test.max():.3f}")
