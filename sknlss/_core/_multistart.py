@@ -1,9 +1,12 @@
-"""Several starts of one fit, run in parallel; one start from candidate points."""
+"""Several starts of one fit, run in parallel; one start from candidate points;
+the initial state of a fitted model on a record."""
 
 import numpy as np
 from sklearn.utils.parallel import Parallel, delayed
 
+from ._model import StateSpaceModel
 from ._optimize import levenberg_marquardt
+from ._problem import SimulationErrorProblem, fit_rows
 
 # What a start may raise and still leave the others standing: a starting
 # point from which a simulation or a factorisation fails numerically.
@@ -77,3 +80,34 @@ def fit_from(problem, candidates, *, label, **options):
                                  validation_loss=problem.validation_loss, label=label,
                                  initial=initial, **options)
     return result.theta, result
+
+
+def fit_initial_state(model, theta, U, Y, x0, *, max_iter):
+    """The initial state minimising the simulation error of a fitted model.
+
+    Parameters
+    ----------
+    model : StateSpaceModel
+        The fitted structure (without an estimated initial state).
+    theta : ndarray
+        Its parameters, kept fixed.
+    U, Y : ndarray of shape (n_samples, n_inputs), (n_samples, n_outputs)
+        One normalised sequence.
+    x0 : ndarray of shape (n_states,)
+        Where the search starts; zero is tried next if the model cannot be
+        simulated from it.
+    max_iter : int
+        Maximum number of Levenberg-Marquardt iterations.
+
+    Returns
+    -------
+    x0 : ndarray of shape (n_states,)
+    """
+    with_x0 = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs, model.terms,
+                              estimate_x0=True)
+    rows = fit_rows(U, Y, np.array([0, len(U)]), n_transient=0, validation_fraction=0.0)
+    free = with_x0.columns("x0")
+    problem = SimulationErrorProblem(with_x0, rows).restricted(
+        np.concatenate([theta, x0]), free)
+    return fit_from(problem, [x0, np.zeros_like(x0)], label="initial state",
+                    max_iter=max_iter)[0]

@@ -27,6 +27,7 @@ from sklearn.utils.validation import (
 )
 
 from .._core._kernels import DIVERGENCE_BOUND
+from .._core._multistart import fit_initial_state
 from .._core._sequences import sequence_bounds, transient_mask
 from .._validation import Integers, binary_magnitude, naming
 from ..exceptions import SimulationDivergedWarning
@@ -275,6 +276,63 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Simulated output.
         """
         return self.simulate(X, sequence_id=sequence_id, x0=x0)
+
+    def estimate_initial_state(self, X, y, *, x0=None, max_iter=100):
+        """The initial state from which the simulation fits a measured record best.
+
+        A record that starts mid-motion starts from an unknown state. This
+        minimises the simulation error of ``(X, y)``, one sequence simulated
+        from its first sample, over the initial state alone (the model's
+        parameters fixed) by Levenberg-Marquardt. Pass the first samples of a
+        record (e.g. the ``init_window`` of a benchmark's test record) and
+        simulate the whole record from the result with ``predict(X, x0=...)``.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs)
+            Input signal.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+            Measured output.
+        x0 : array-like of shape (n_states,), default=None
+            Where the search starts; ``None`` uses the fitted ``x0_``.
+        max_iter : int, default=100
+            Maximum number of Levenberg-Marquardt iterations.
+
+        Returns
+        -------
+        x0 : ndarray of shape (n_states,)
+            Initial state in the model's (normalised) state coordinates, as
+            ``predict`` and ``simulate`` take it.
+
+        Examples
+        --------
+        >>> from sknlss import BLAEstimator
+        >>> from sknlss.datasets import make_duffing
+        >>> data = make_duffing(random_state=0)
+        >>> model = BLAEstimator(n_states=2).fit(data.X_est, data.y_est)
+        >>> w = data.init_window
+        >>> x0 = model.estimate_initial_state(data.X_test[:w], data.y_test[:w])
+        >>> y_sim = model.predict(data.X_test, x0=x0)
+        """
+        check_is_fitted(self)
+        if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or (
+                max_iter < 0):
+            raise ValueError(f"max_iter must be an int >= 0, got {max_iter!r}.")
+        with naming("X"):
+            X = validate_data(self, X, reset=False, dtype=np.float64)
+        with naming("y"):
+            y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y")
+        Y = y.reshape(len(y), -1)
+        if Y.shape != (X.shape[0], self.C_.shape[0]):
+            raise ValueError(
+                f"y must have {X.shape[0]} rows (as X) and {self.C_.shape[0]} output(s); "
+                f"got shape {y.shape}."
+            )
+        start = self._initial_states(x0, 1)[0]
+        model, theta = self._fitted_model()
+        return fit_initial_state(model, theta, _normalised(X, self.u_offset_, self.u_scale_),
+                                 _normalised(Y, self.y_offset_, self.y_scale_), start,
+                                 max_iter=max_iter)
 
     def score(self, X, y, *, sequence_id=None):
         """R² of the simulated output, skipping ``n_transient`` samples per sequence.
