@@ -6,14 +6,15 @@ Cascaded Tanks) and fitted at random states 0-9 on:
 
 - Cascaded Tanks (DESIGN.md §3): fitted on the estimation record; the initial
   state, when estimated, is reused on the test record; RMS error over the whole
-  test record and without its first 50 samples (V);
+  test record, and over its samples after the first 50, from the state that
+  fits those 50 (V);
 - Silverbox: fitted on the estimation record; each test record (multisine,
-  arrow, full arrow) simulated from its start; RMS error without the first 50
-  samples (mV);
+  arrow, full arrow) simulated from its start, from the state that fits its
+  first 50 samples; RMS error over the others (mV);
 - the simulated systems of ``sknlss.datasets`` (Wiener-Hammerstein, Duffing,
   Bouc-Wen, closed-loop drive): fitted on the estimation record of
-  ``random_state=0``, RMS error on its test record without the first 50
-  samples, relative to the test output's standard deviation.
+  ``random_state=0``; its test record scored like a Silverbox one, relative to
+  the test output's standard deviation.
 
 It prints, per benchmark, estimator and test record, the median, minimum and
 maximum of the errors and the median fit time, and writes them to

@@ -112,9 +112,10 @@ for n_fit in (500, 600, 700):
 # the paper's structure (selection on held-out ends of that record, initial
 # state estimated there and reused on the test record). ``test[50:]`` is the
 # nonlinear_benchmarks variant that lets the first 50 test samples set the
-# state. One random state keeps this example short; the main job
-# (``python -m sknlss reproduce``) fits every model at several random states
-# and reports the median and the range of the errors.
+# state (the initial state that fits them). One random state keeps this
+# example short; the main job (``python -m sknlss reproduce``) fits every
+# model at several random states and reports the median and the range of the
+# errors.
 rows = reproduce(["cascaded_tanks"], random_states=(0,))["cascaded_tanks"]
 
 # %%

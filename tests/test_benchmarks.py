@@ -12,6 +12,7 @@ from sknlss import BLAEstimator, PNLSSRegressor, benchmarks
 from sknlss.__main__ import main
 from sknlss.benchmarks import BENCHMARKS, Benchmark, evaluate, format_table, reproduce
 from sknlss.datasets import make_cascaded_tanks
+from sknlss.metrics import rms_error
 
 
 def _tiny_benchmark():
@@ -36,6 +37,11 @@ def test_evaluate_summarises_over_random_states():
     assert isinstance(fitted["BLA"], BLAEstimator)
     text = format_table(rows, records, "mV")
     assert "test (mV)" in text and "BLA" in text
+    # The first 50 samples of "tail" set the state of its simulation.
+    model = fitted["BLA"]
+    x0 = model.estimate_initial_state(data.X_test[:50], data.y_test[:50])
+    tail = rms_error(data.y_test[50:], model.predict(data.X_test, x0=x0)[50:])
+    assert rows[0]["tail"] == pytest.approx(1e3 * tail, rel=1e-9)
 
 
 def test_reproduce_writes_tables_and_figures(monkeypatch, tmp_path):

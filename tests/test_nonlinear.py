@@ -158,3 +158,37 @@ def test_only_the_kept_start_warns(record):
     assert all(f"start {best}:" in str(w.message) for w in convergence)
     # The warning points at the caller of fit, not into the library.
     assert all(w.filename == __file__ for w in convergence)
+
+
+@pytest.fixture(scope="module")
+def fitted_models(record):
+    u, y = record
+    models = {name: factory(n_states=2).fit(u, y) for name, factory in FACTORIES.items()}
+    models["BLA"] = BLAEstimator(n_states=2).fit(u, y)
+    return models
+
+
+@pytest.mark.parametrize("name", [*FACTORIES, "BLA"])
+def test_estimate_initial_state_recovers_the_state(name, fitted_models, record):
+    # A record the model itself produces from a known state, which the first
+    # samples then give back.
+    model = fitted_models[name]
+    u = record[0][:60]
+    x_true = np.array([0.8, -0.5])
+    y = model.predict(u, x0=x_true)
+    x0 = model.estimate_initial_state(u[:20], y[:20], x0=np.zeros(2))
+    np.testing.assert_allclose(x0, x_true, atol=1e-6)
+    np.testing.assert_allclose(model.predict(u, x0=x0), y, atol=1e-6 * np.std(y))
+
+
+def test_estimate_initial_state_bad_input(fitted_models, record):
+    model = fitted_models["PNLSS"]
+    u, y = record[0][:20], record[1][:20]
+    with pytest.raises(ValueError, match="y must have 20 rows"):
+        model.estimate_initial_state(u, y[:10])
+    with pytest.raises(ValueError, match="NaN"):
+        model.estimate_initial_state(u, np.where(np.arange(20) == 3, np.nan, y))
+    with pytest.raises(ValueError, match="max_iter must be an int >= 0"):
+        model.estimate_initial_state(u, y, max_iter=-1)
+    with pytest.raises(ValueError, match="x0 must be finite, of shape"):
+        model.estimate_initial_state(u, y, x0=np.zeros(3))
