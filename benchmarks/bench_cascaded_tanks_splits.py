@@ -1,21 +1,21 @@
 """How much the Cascaded Tanks results depend on the held-out split.
 
-The main job (``python -m sknlss reproduce``) fits every nonlinear model at
-held-out shares 0.25 to 0.35 of the estimation record (and the PNLSS models
-with and without the stability penalty), then keeps the fit with the smallest
-error on the last 25 % of the estimation record
-(:class:`~sknlss.model_selection.HoldoutSearch`). This script prints every
-candidate of those searches: per held-out share, the RMS error on that common
-held-out end (what the search compares) and on the test record.
+With ``validation_fraction="auto"`` (the default), the starts of a nonlinear
+estimator hold out the shares 0.25, 0.3, 0.35, 0.275 and 0.325 of the end of
+the estimation record in turn and are ranked on the end that all of them held
+out. This script fits every nonlinear model of the main job (``python -m
+sknlss reproduce``) at random state 0 with each of these shares alone, and
+prints per share the RMS error on that common end (the last 25 % of the
+estimation record, what the default ranking compares) and on the test record.
 
-This is an analysis of the protocol, not a selection: no setting of the main
-job is chosen from the test column. It shows how far a single split decides
-the result on a record this short: the held-out end of the estimation record
-holds one of its two overflow episodes, and the iterate a held-out end prefers
-changes with a few dozen samples more or less.
+This is an analysis of the protocol, not a selection: no setting is chosen
+from the test column. It shows how far a single split decides the result on a
+record this short: the held-out end of the estimation record holds one of its
+two overflow episodes, and the iterate a held-out end prefers changes with a
+few dozen samples more or less.
 
 Needs the measured data (``SKNLSS_DATA`` or the user cache folder). Takes
-about three minutes on two cores.
+about five minutes on two cores.
 
 Run: ``python benchmarks/bench_cascaded_tanks_splits.py``
 """
@@ -23,26 +23,18 @@ Run: ``python benchmarks/bench_cascaded_tanks_splits.py``
 import warnings
 
 import numpy as np
-from sklearn.exceptions import ConvergenceWarning
-
 from sklearn.base import clone
-from sklearn.model_selection import ParameterGrid
 
-from sknlss.__main__ import MODELS
-from sknlss.datasets import load_cascaded_tanks
+from sknlss.benchmarks import BENCHMARKS
+from sknlss.datasets import fetch_cascaded_tanks
 from sknlss.metrics import rms_error
-from sknlss.model_selection import HoldoutSearch
+
+SHARES = (0.25, 0.275, 0.3, 0.325, 0.35)
 
 
-
-def _test_rms(model, data):
-    """RMS error (V) on the test record; inf when the simulation diverges."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        y_test = model.predict(data.X_test)
-    if not np.all(np.isfinite(y_test)):
-        return np.inf
-    return rms_error(data.y_test, y_test)
+def _rms(y, y_model):
+    """RMS error (V); inf when the simulation diverged."""
+    return rms_error(y, y_model) if np.all(np.isfinite(y_model)) else np.inf
 
 
 def _format(value):
@@ -50,37 +42,27 @@ def _format(value):
 
 
 def main():
-    data = load_cascaded_tanks()
-    print("Cascaded Tanks: RMS on the common held-out end / RMS on the test record "
-          "(V), per held-out share of the estimation record\n")
-    header = None
-    for name, factory in MODELS:
-        search = factory()
-        if not isinstance(search, HoldoutSearch):
+    data = fetch_cascaded_tanks(download_if_missing=False)
+    end = len(data.y_est) - int(round(min(SHARES) * len(data.y_est)))
+    print("Cascaded Tanks, random state 0: RMS on the common held-out end / RMS on "
+          "the test record (V), per held-out share of the estimation record\n")
+    header = f"{'model':<20}" + "".join(f"{share:>19}" for share in SHARES)
+    print(header)
+    print("-" * len(header))
+    for label, factory in BENCHMARKS["cascaded_tanks"].models():
+        model = factory(0)
+        if "validation_fraction" not in model.get_params():
             continue
-        fractions = search.validation_fractions
-        if header is None:
-            header = f"{'model':<46}" + "".join(f"{f:>19}" for f in fractions)
-            print(header)
-            print("-" * len(header))
-        for setting in ParameterGrid(search.param_grid or {}):
-            cells = []
-            for fraction in fractions:
-                single = clone(search).set_params(
-                    validation_fractions=[fraction], param_grid=[
-                        {key: [value] for key, value in setting.items()}])
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", ConvergenceWarning)
-                    single.fit(data.X_est, data.y_est)
-                # Rank on the end held out at every share, as the search does.
-                end = len(data.y_est) - int(round(min(fractions) * len(data.y_est)))
-                y_est = single.predict(data.X_est)
-                held_out = (rms_error(data.y_est[end:], y_est[end:])
-                            if np.all(np.isfinite(y_est)) else np.inf)
-                cells.append(f"{_format(held_out)} / "
-                             f"{_format(_test_rms(single, data))}")
-            label = name + "".join(f" {key}={value}" for key, value in setting.items())
-            print(f"{label:<46}" + "".join(f"{cell:>19}" for cell in cells), flush=True)
+        cells = []
+        for share in SHARES:
+            single = clone(model).set_params(validation_fraction=share)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                single.fit(data.X_est, data.y_est)
+                y_est, y_test = single.predict(data.X_est), single.predict(data.X_test)
+            cells.append(f"{_format(_rms(data.y_est[end:], y_est[end:]))} / "
+                         f"{_format(_rms(data.y_test, y_test))}")
+        print(f"{label:<20}" + "".join(f"{cell:>19}" for cell in cells), flush=True)
 
 
 if __name__ == "__main__":

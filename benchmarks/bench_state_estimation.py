@@ -19,7 +19,7 @@ _CHILD = """
 import json, resource, sys, time
 import numpy as np
 from threadpoolctl import threadpool_limits
-from sknlss._state_estimation import estimate_states
+from sknlss._linear._state_estimation import estimate_states
 
 n_samples, threads = int(sys.argv[1]), int(sys.argv[2])
 rng = np.random.default_rng(0)

@@ -32,9 +32,9 @@ def _silverbox_medians(factory, data):
 def test_silverbox_pnlss(silverbox):
     """Silverbox, PNLSS with ``n_states=2`` and its defaults: <= 0.35 mV on the
     multisine and on the arrow without extrapolation. Over random states 0-9
-    ``benchmarks/bench_accuracy.py`` measured medians of 0.266 mV [0.266,
-    0.268] and 0.241 mV [0.239, 0.242]: the margin is thirty times the
-    spread."""
+    ``benchmarks/bench_accuracy.py`` measured medians of 0.221 mV [0.220,
+    0.223] and 0.241 mV [0.239, 0.242] (each record's state set from its
+    first 50 samples): the margin is thirty times the spread."""
     medians = _silverbox_medians(
         lambda seed: PNLSSRegressor(n_states=2, random_state=seed), silverbox)
     assert medians["multisine"] <= 0.35
@@ -45,15 +45,17 @@ def test_silverbox_pnlss(silverbox):
 def test_silverbox_nllfr(silverbox):
     """Silverbox, NL-LFR with ``n_states=2`` and its defaults, 17 parameters.
 
-    Over random states 0-9 the benchmark measured 0.295 mV [0.2949, 0.2953] on
-    the multisine and 0.3645 mV [0.3645, 0.366] on the full arrow. The bounds,
-    0.30 and 0.38 mV, hold what is reached with a margin of more than five
-    times that spread; they are not yet the targets of 0.29 and 0.34 mV (the
-    frequency-domain NL-LFR recipe of freq-statespace reaches 0.288 and
+    Over random states 0-9 the benchmark measured 0.254 mV [0.2537, 0.2541]
+    on the multisine and 0.3645 mV [0.3644, 0.366] on the full arrow (each
+    record's state set from its first 50 samples). The multisine bound is the
+    target, 0.29 mV (the frequency-domain NL-LFR recipe of freq-statespace
+    reaches 0.288 mV), with a margin of about a hundred times the spread; the
+    full-arrow bound, 0.38 mV, holds what is reached with a margin of ten
+    times the spread, short of the target of 0.34 mV (freq-statespace:
     0.334 mV).
     """
     medians = _silverbox_medians(
         lambda seed: NLLFRRegressor(n_states=2, random_state=seed), silverbox)
-    assert medians["multisine"] <= 0.30
+    assert medians["multisine"] <= 0.29
     assert medians["arrow_full"] <= 0.38
     assert medians["n_params"] <= 25

@@ -2,7 +2,6 @@ import dataclasses
 import hashlib
 import io
 import shutil
-import time
 import zipfile
 from pathlib import Path
 
@@ -148,7 +147,7 @@ def test_missing_data_message_without_download(tmp_path, empty_environment, monk
     assert "could not be downloaded" not in message
 
 
-def test_failed_download_is_fast_and_clear(tmp_path, empty_environment, monkeypatch):
+def test_failed_download_is_tried_once_and_clear(tmp_path, empty_environment, monkeypatch):
     requested = []
 
     def offline(url, output_file, pooch):
@@ -156,10 +155,8 @@ def test_failed_download_is_fast_and_clear(tmp_path, empty_environment, monkeypa
         raise OSError("Name or service not known")
 
     monkeypatch.setattr(_fetch, "_downloader", lambda: offline)
-    start = time.perf_counter()
     with pytest.raises(FileNotFoundError) as info:
         fetch_cascaded_tanks(tmp_path / "home")
-    assert time.perf_counter() - start < 1.0
     assert requested == [_cascaded_tanks.CASCADED_TANKS.archive_url]
     message = str(info.value)
     assert "could not be downloaded (Name or service not known)" in message
@@ -480,13 +477,6 @@ def test_pnlss_reference_noise_level():
     assert noise.std() == pytest.approx(expected, rel=0.05)
     lag1 = np.corrcoef(noise[1:-2], noise[2:-1])[0, 1]
     assert lag1 == pytest.approx(0.5, abs=0.05)
-
-
-def test_pnlss_reference_is_fast():
-    make_pnlss_reference()
-    start = time.perf_counter()
-    make_pnlss_reference(n_realizations=4, n_periods=4)
-    assert time.perf_counter() - start < 0.1
 
 
 @pytest.mark.parametrize("kwargs, name", [

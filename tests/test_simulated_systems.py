@@ -1,7 +1,6 @@
-"""The simulated systems: records, noise level, nonlinearity, validation, speed."""
+"""The simulated systems: records, noise level, nonlinearity, validation."""
 
 import inspect
-import time
 
 import numpy as np
 import pytest
@@ -119,14 +118,6 @@ def test_test_record_starts_mid_motion(make):
     window = data.y_test[:data.init_window]
     assert np.ptp(window) > 20 * data.noise_std
     assert abs(data.y_est[0]) > 0 and abs(data.X_est[0, 0]) > 0
-
-
-@pytest.mark.parametrize("make", GENERATORS, ids=_ids(GENERATORS))
-def test_fast(make):
-    make(random_state=0)
-    start = time.perf_counter()
-    make(random_state=1)
-    assert time.perf_counter() - start < 0.3
 
 
 @pytest.mark.parametrize("make, scale", [(make_duffing, 0.1), (make_bouc_wen, 0.1),
