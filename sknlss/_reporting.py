@@ -39,12 +39,15 @@ def _write_figures(name, benchmark, data, fitted, output):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .benchmarks import _simulate_record
     from .plotting import plot_error_spectrum, plot_frf, plot_simulation
 
     paths = []
     Ts = data.sampling_time
     record, (X, y, skip) = next(iter(benchmark.records(data).items()))
-    simulations = {label: model.predict(X) for label, model in fitted.items()}
+    # As in the tables: the first samples of the record set the state.
+    simulations = {label: _simulate_record(model, X, y, skip)
+                   for label, model in fitted.items()}
     finite = {label: y_sim for label, y_sim in simulations.items()
               if np.all(np.isfinite(y_sim))}
     bla = next((model for model in fitted.values() if hasattr(model, "frf_")), None)

@@ -201,6 +201,12 @@ def _window_state(model, X, y):
         return None
 
 
+def _simulate_record(model, X, y, n_skip):
+    """The simulation of a test record from the state that fits its first
+    ``n_skip`` samples (see ``_window_state``)."""
+    return model.predict(X, x0=_window_state(model, X[:n_skip], y[:n_skip]))
+
+
 def _fit_and_score(factory, seed, data, records, scale):
     """Fit ``factory(seed)`` on the estimation record and score it on ``records``.
 
@@ -225,8 +231,8 @@ def _fit_and_score(factory, seed, data, records, scale):
         # A diverging simulation is reported as such in the table.
         warnings.simplefilter("ignore", SimulationDivergedWarning)
         for name, (X, y, skip) in records.items():
-            errors[name] = scale * rms_error(
-                y[skip:], model.predict(X, x0=_window_state(model, X[:skip], y[:skip]))[skip:])
+            errors[name] = scale * rms_error(y[skip:],
+                                             _simulate_record(model, X, y, skip)[skip:])
     return {"model": model, "errors": errors, "fit_time": fit_time,
             "still_improving": any(issubclass(w.category, ConvergenceWarning)
                                    for w in caught)}
