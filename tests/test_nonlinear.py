@@ -188,7 +188,7 @@ def test_estimate_initial_state_bad_input(fitted_models, record):
         model.estimate_initial_state(u, y[:10])
     with pytest.raises(ValueError, match="NaN"):
         model.estimate_initial_state(u, np.where(np.arange(20) == 3, np.nan, y))
-    with pytest.raises(ValueError, match="max_iter must be an int >= 0"):
+    with pytest.raises(ValueError, match="'max_iter' parameter .* must be an int in the range"):
         model.estimate_initial_state(u, y, max_iter=-1)
     with pytest.raises(ValueError, match="x0 must be finite, of shape"):
         model.estimate_initial_state(u, y, x0=np.zeros(3))

@@ -19,6 +19,7 @@ from abc import ABCMeta, abstractmethod
 import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.metrics import r2_score
+from sklearn.utils._param_validation import validate_params
 from sklearn.utils.validation import (
     check_array,
     check_consistent_length,
@@ -277,6 +278,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """
         return self.simulate(X, sequence_id=sequence_id, x0=x0)
 
+    @validate_params({"max_iter": [Integers(0, None, closed="left")]},
+                     prefer_skip_nested_validation=True)
     def estimate_initial_state(self, X, y, *, x0=None, max_iter=100):
         """The initial state from which the simulation fits a measured record best.
 
@@ -315,9 +318,6 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         >>> y_sim = model.predict(data.X_test, x0=x0)
         """
         check_is_fitted(self)
-        if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or (
-                max_iter < 0):
-            raise ValueError(f"max_iter must be an int >= 0, got {max_iter!r}.")
         with naming("X"):
             X = validate_data(self, X, reset=False, dtype=np.float64)
         with naming("y"):

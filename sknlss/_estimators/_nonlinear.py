@@ -345,9 +345,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                        "starts": starts, "rows": problem.rows, "seeds": seeds}
             self._prepare_starts(context)
             contexts.append(context)
-        n_candidates = len(problem_sets)
-        runs = [(i % n_candidates, i // n_candidates) for i in range(self.n_init)]
-        runs = [(c, j, shares[j], seeds[j]) for c, j in runs]
+        k = len(problem_sets)
+        runs = [(i % k, i // k, shares[i // k], seeds[i // k]) for i in range(self.n_init)]
         outcomes = run_starts(
             _fit_start,
             [(self, contexts[c], problem_sets[c][share], j, seed,
