@@ -74,15 +74,22 @@ def test_reference_system_time_cost(reference):
     # simulated in steady state (one prepended period).
     X = data.X[estimation].reshape(2, 3, period)[:, 0].reshape(-1, 1)
     y = data.y[estimation].reshape(2, 3, period).mean(axis=1).ravel()
-    model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        model.fit(X, y, sequence_id=np.repeat([0, 1], period))
-    assert model.n_params_ == 4 + 2 + 2 + 1 + 2 * 16 + 16 == 57
+    # The median over random states 0-2: over 0-9 the test RMS was 2.79e-4 to
+    # 2.98e-4 (median 2.86e-4), close to the noise of the single test period.
+    models, errors = [], []
+    for seed in (0, 1, 2):
+        model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60,
+                               random_state=seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            model.fit(X, y, sequence_id=np.repeat([0, 1], period))
+        models.append(model)
+        errors.append(_reference_test_rms(model, data, test, period))
+    assert all(model.n_params_ == 4 + 2 + 2 + 1 + 2 * 16 + 16 == 57 for model in models)
     bla = BLAEstimator(2, period=period).fit(X, y, sequence_id=np.repeat([0, 1], period))
     linear = _reference_test_rms(bla, data, test, period)
-    assert _reference_test_rms(model, data, test, period) <= 3e-4 < 0.1 * linear
-    assert model.loss_history_[-1] < 1e-3 * model.loss_history_[0]
+    assert np.median(errors) <= 3e-4 < 0.1 * linear
+    assert all(model.loss_history_[-1] < 1e-3 * model.loss_history_[0] for model in models)
 
 
 def test_reference_system_frequency_cost(reference):
