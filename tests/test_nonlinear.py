@@ -15,6 +15,14 @@ from sknlss import (
     NLSS2Regressor,
     PNLSSRegressor,
 )
+from sknlss._core._model import StateSpaceModel
+from sknlss._core._problem import SimulationErrorProblem, fit_rows
+from sknlss._estimators._nonlinear import (
+    _prefer_finite_when_doubled,
+    escapes_when_doubled,
+    stays_bounded,
+)
+from sknlss._terms._polynomial import PolynomialTerms, monomial_exponents
 from sknlss.metrics import rms_error
 from sknlss.signals import multisine
 
@@ -138,6 +146,49 @@ def test_fallback_to_the_linear_model_is_reported(record):
     assert np.all(model.E_ == 0) and np.all(model.F_ == 0)
     fitted = PNLSSRegressor(2, max_iter=20, validation_fraction=0.3).fit(u, y)
     assert not fitted.fell_back_to_linear_
+
+
+def _cubic_problem(amplitude):
+    """x(t+1) = x/2 + u + x^3/20 with a sine input, and its parameters: the
+    simulation escapes to infinity once |x| is large enough."""
+    cubic = monomial_exponents(1, 1, 3, "states_only")
+    model = StateSpaceModel(1, 1, 1, PolynomialTerms(1, 1, cubic, cubic))
+    theta = model.pack({"A": [[0.5]], "B": [[1.0]], "C": [[1.0]], "D": [[0.0]],
+                        "E": [[0.05]], "F": [[0.0]]})
+    U = amplitude * np.sin(np.linspace(0, 12 * np.pi, 300))[:, None]
+    starts = np.array([0, 300])
+    Y = model.simulate(theta, U, starts)[0]
+    rows = fit_rows(U, Y, starts, n_transient=0, validation_fraction=0.0)
+    return SimulationErrorProblem(model, rows), theta
+
+
+@pytest.mark.parametrize("amplitude, escapes", [(0.3, False), (0.5, True)])
+def test_boundedness_checks(amplitude, escapes):
+    # With amplitude 0.5 the system stays finite on the input and on 1.2 and
+    # 1.5 times it, and escapes on twice it; with 0.3 it stays finite on all.
+    problem, theta = _cubic_problem(amplitude)
+    model, U, starts = problem.model, problem.U, problem.starts
+    assert not model.simulate(theta, U, starts)[2]
+    assert not model.simulate(theta, 1.5 * U, starts)[2]
+    assert bool(model.simulate(theta, 2.0 * U, starts)[2]) == escapes
+    assert stays_bounded(problem, theta)
+    assert escapes_when_doubled(problem, theta) == escapes
+    theta[model.columns("B")] = 30.0
+    assert not stays_bounded(problem, theta)
+
+
+def test_a_start_that_stays_finite_on_the_doubled_input_is_preferred():
+    problem, escaping = _cubic_problem(0.5)
+    finite = escaping.copy()
+    finite[problem.model.columns("E")] = 0.0
+    starts = [(problem, escaping), (problem, finite), (problem, None)]
+    # Nearly as good: the escaping start is out.
+    assert _prefer_finite_when_doubled([1.0, 1.5, np.inf], starts) == [np.inf, 1.5, np.inf]
+    # Much worse: the ranking is left as it is.
+    assert _prefer_finite_when_doubled([1.0, 3.0, np.inf], starts) == [1.0, 3.0, np.inf]
+    # Every good start escapes: unchanged.
+    both = [(problem, escaping), (problem, escaping)]
+    assert _prefer_finite_when_doubled([1.0, 1.2], both) == [1.0, 1.2]
 
 
 def test_convergence_warning_from_the_shared_optimiser(record):

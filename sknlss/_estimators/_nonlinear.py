@@ -58,6 +58,12 @@ _MAX_TRANSIENT_SHARE = 0.1
 #: when the estimation input is enlarged by a fifth (see ``stays_bounded``).
 _GUARD_GAIN = 1.2
 _GUARD_RANGE = 10.0
+#: Of the starts within this factor of the best held-out loss, one whose
+#: simulation stays finite on the doubled estimation input is preferred (see
+#: ``_prefer_finite_when_doubled``); the changes of selection this made on
+#: fresh simulated records came from starts within 1.5 times the best.
+_ESCAPE_GAIN = 2.0
+_ESCAPE_TOLERANCE = 2.0
 #: Copies of the Jacobian a Levenberg-Marquardt step holds at its peak: the
 #: one the kernel fills, the same stacked with the penalty rows, and the
 #: optimiser's column-scaled working copy that its QR factorisation overwrites.
@@ -365,6 +371,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                   or not stays_bounded(common[c], outcome[0])
                   else holdout_loss(common[c], outcome[0])
                   for (c, *_), outcome in zip(runs, outcomes)]
+        losses = _prefer_finite_when_doubled(
+            losses, [(common[c], None if isinstance(outcome, Exception) else outcome[0])
+                     for (c, *_), outcome in zip(runs, outcomes)])
         best = int(np.argmin(losses))
         theta_best, result, start_warnings = outcomes[best]
         c_best, j_best, _, seed_best = runs[best]
@@ -449,6 +458,38 @@ def stays_bounded(problem, theta):
         return False
     span = np.max(np.abs(problem.Y - problem.Y.mean(axis=0)), axis=0)
     return bool(np.all(np.abs(Y - problem.Y.mean(axis=0)) <= _GUARD_RANGE * span))
+
+
+def escapes_when_doubled(problem, theta):
+    """Whether the model's simulation diverges on the fitted records' input
+    enlarged ``_ESCAPE_GAIN`` times about its mean.
+
+    Polynomial models often escape to infinity just beyond the estimation
+    amplitude; this asks no accuracy there, only a finite response.
+    """
+    U = problem.U
+    mean = U.mean(axis=0)
+    return bool(problem.simulate_input(theta, mean + _ESCAPE_GAIN * (U - mean))[2])
+
+
+def _prefer_finite_when_doubled(losses, starts):
+    """The starts' held-out ``losses`` with those whose simulation escapes on
+    the doubled input set to inf, when a start that does not escape there is
+    nearly as good (within ``_ESCAPE_TOLERANCE`` times the best loss);
+    otherwise unchanged. ``starts`` holds each start's ``(problem, theta)``.
+
+    A system whose every good model escapes there (a softening cubic, say) is
+    fitted as without the check, and a poor start is never preferred for
+    staying finite.
+    """
+    best = min(losses)
+    if not np.isfinite(best):
+        return losses
+    escapes = {i: escapes_when_doubled(*starts[i]) for i, loss in enumerate(losses)
+               if loss <= _ESCAPE_TOLERANCE * best}
+    if all(escapes.values()) or not any(escapes.values()):
+        return losses
+    return [np.inf if escapes.get(i, False) else loss for i, loss in enumerate(losses)]
 
 
 def holdout_loss(problem, theta):
