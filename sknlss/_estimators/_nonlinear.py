@@ -451,9 +451,7 @@ def stays_bounded(problem, theta):
     nearly as good on the data; the check keeps such models out of the
     selection (the linear model it falls back on is stable).
     """
-    U = problem.U
-    mean = U.mean(axis=0)
-    Y, _, diverged = problem.simulate_input(theta, mean + _GUARD_GAIN * (U - mean))
+    Y, _, diverged = _simulate_enlarged(problem, theta, _GUARD_GAIN)
     if diverged:
         return False
     span = np.max(np.abs(problem.Y - problem.Y.mean(axis=0)), axis=0)
@@ -467,9 +465,15 @@ def escapes_when_doubled(problem, theta):
     Polynomial models often escape to infinity just beyond the estimation
     amplitude; this asks no accuracy there, only a finite response.
     """
+    return bool(_simulate_enlarged(problem, theta, _ESCAPE_GAIN)[2])
+
+
+def _simulate_enlarged(problem, theta, gain):
+    """Outputs, states and divergence flag on the fitted records' input
+    enlarged ``gain`` times about its mean."""
     U = problem.U
     mean = U.mean(axis=0)
-    return bool(problem.simulate_input(theta, mean + _ESCAPE_GAIN * (U - mean))[2])
+    return problem.simulate_input(theta, mean + gain * (U - mean))
 
 
 def _prefer_finite_when_doubled(losses, starts):
