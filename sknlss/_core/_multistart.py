@@ -78,7 +78,8 @@ def fit_from(problem, candidates, *, label, **options):
         )
     result = levenberg_marquardt(problem.residual, theta0,
                                  validation_loss=problem.validation_loss, label=label,
-                                 initial=initial, **options)
+                                 initial=initial, n_residuals=problem.n_residuals,
+                                 **options)
     return result.theta, result
 
 

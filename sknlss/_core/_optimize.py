@@ -40,7 +40,8 @@ class LMResult:
         Selected parameters: the iterate with the lowest validation loss when a
         validation function was given, else the last (lowest-cost) iterate.
     loss_history : ndarray of shape (n_iter + 1,)
-        Mean squared residual of the current iterate, starting with the initial one.
+        Cost (sum of squared residuals) of the current iterate divided by the
+        number of residuals, starting with the initial one.
     validation_history : ndarray of shape (n_iter + 1,) or None
         Validation loss of each iterate.
     best_iter : int
@@ -85,12 +86,14 @@ def _scaled_step_factors(J, r):
     p = J.shape[1]
     col_scale = np.sqrt(np.einsum("ij,ij->j", J, J))
     col_scale[col_scale == 0.0] = 1.0
-    # Rows that are zero in J and r (a penalty that is inactive at most
-    # samples) change neither factor; leaving them out of the QR, whose cost
-    # grows with the rows, spares most of the work of penalised problems.
-    kept = (r != 0.0) | np.any(J != 0.0, axis=1)
-    if kept.any() and not kept.all():
-        J, r = J[kept], r[kept]
+    # Rows that are zero in J and r (e.g. the imaginary parts of the DFT's
+    # real bins) change neither factor; the QR's cost grows with the rows.
+    # Only rows with a zero residual can be such rows.
+    kept = r != 0.0
+    if not kept.all():
+        kept[~kept] = np.any(J[~kept] != 0.0, axis=1)
+        if kept.any() and not kept.all():
+            J, r = J[kept], r[kept]
     augmented = np.empty((r.size, p + 1), order="F")
     np.divide(J, col_scale, out=augmented[:, :p])
     augmented[:, p] = r
@@ -148,6 +151,7 @@ def levenberg_marquardt(
     verbose=0,
     label="LM",
     initial=None,
+    n_residuals=None,
 ):
     """Minimise ``sum(residual(theta)**2)`` by Levenberg-Marquardt.
 
@@ -179,6 +183,10 @@ def levenberg_marquardt(
         Prefix of the progress lines.
     initial : tuple of ndarray, default=None
         ``residual(theta0, True)`` when the caller has it already.
+    n_residuals : int, default=None
+        Number of residuals the reported losses are averaged over; ``None``
+        uses the length of the initial residual (give it when penalty rows
+        come and go).
 
     Returns
     -------
@@ -191,7 +199,7 @@ def levenberg_marquardt(
             "The initial model diverges or gives non-finite values on the "
             "estimation data (X, y); it cannot start the optimisation."
         )
-    m = r.size
+    m = r.size if n_residuals is None else n_residuals
     cost = float(r @ r)
     losses = [cost / m]
     val_losses = None

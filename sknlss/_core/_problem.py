@@ -286,6 +286,9 @@ class SimulationErrorProblem:
             self.weights = _output_noise_weights(Y_fit, self.blocks, frequency_period)
             self.target = _frequency_rows(Y_fit, self.blocks, frequency_period,
                                           self.weights).ravel()
+        # The losses are averaged over the simulation-error residuals only: the
+        # penalties add a varying number of rows.
+        self.n_residuals = self.target.size
         self.validation_loss = self._validation_loss if self.val_rows.any() else None
         self.decay_scale = None
         # (theta, outputs, diverged) of the last residual: the optimiser asks
@@ -359,7 +362,10 @@ class SimulationErrorProblem:
         """Rows of the stability penalty and their Jacobian.
 
         The rows are the excess over 1 of the local spectral radius of the
-        state map along the fitted trajectory. Their Jacobian holds the direct
+        state map at the fitted samples where it exceeds 1 (elsewhere they
+        are zero, with a zero Jacobian, and are left out: the penalty is
+        inactive at most samples, and the optimiser's factorisation costs in
+        proportion to the rows). Their Jacobian holds the direct
         dependence on A and on the terms' parameters (by central differences
         in the states of the terms' parameter Jacobian, at the points where
         the radius exceeds 1 only: elsewhere the rows are flat); the states' own
@@ -385,21 +391,19 @@ class SimulationErrorProblem:
         screened, complex_stack = screening_radius(local)
         near = np.flatnonzero(screened > 1.0 - _SCREEN_MARGIN)
         radius, gradient = spectral_radius(local[near], complex_stack)
-        excess = np.zeros(len(S))
-        excess[near] = np.maximum(radius - 1.0, 0.0)
-        weight = np.sqrt(self.stability_penalty * n_residuals / len(S))
-        rows = weight * excess
-        if not jacobian:
-            return rows, None
-        J = np.zeros((len(S), theta.size))
         above = radius > 1.0
         active = near[above]
+        weight = np.sqrt(self.stability_penalty * n_residuals / len(S))
+        rows = weight * (radius[above] - 1.0)
+        if not jacobian:
+            return rows, None
+        J = np.zeros((active.size, theta.size))
         if active.size:
             G = weight * gradient[above]
-            J[active, : n * n] = G.reshape(active.size, -1)
+            J[:, : n * n] = G.reshape(active.size, -1)
             terms_state = model.terms_columns[: model.terms.n_state_params]
-            J[np.ix_(active, terms_state)] = model.curvature_contraction(
-                theta, S[active], G, _PENALTY_STEP)
+            J[:, terms_state] = model.curvature_contraction(theta, S[active], G,
+                                                            _PENALTY_STEP)
         return rows, J
 
     def _decay_rows(self, theta, jacobian):
@@ -440,6 +444,7 @@ class _Restricted:
 
     def __init__(self, problem, theta, free):
         self._problem, self._base, self._free = problem, theta.copy(), free
+        self.n_residuals = problem.n_residuals
         self.validation_loss = (None if problem.validation_loss is None
                                 else self._validation_loss)
 

@@ -212,9 +212,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
-        Mean squared simulation error on the fitted rows per iteration;
-        ``loss_history_[0]`` is that of the decoupled model (of the kept
-        start) before the re-optimisation.
+        Cost per iteration: the squared simulation error on the fitted rows
+        plus the ``stability_penalty`` and ``weight_decay`` terms, divided by
+        the number of fitted residuals; ``loss_history_[0]`` is that of the
+        decoupled model (of the kept start) before the re-optimisation.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
         Mean squared simulation error on the held-out rows per iteration.
     best_iteration_ : int

@@ -230,7 +230,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps of the kept start.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
-        Cost per iteration.
+        Cost per iteration: the squared simulation error on the fitted rows
+        plus the penalty terms, divided by the number of fitted residuals.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
         Held-out loss per iteration.
     best_iteration_ : int

@@ -260,7 +260,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     n_iter_ : int
         Iterations of the kept start.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
-        Mean squared training residual per iteration of the kept start.
+        Cost per iteration of the kept start: the squared simulation error on
+        the fitted rows plus the penalty terms, divided by the number of
+        fitted residuals.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
         Validation loss per iteration, when ``validation_fraction > 0``.
     best_iteration_ : int

@@ -155,9 +155,10 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
-        Cost per iteration (mean squared residual; weighted spectra for
-        ``cost="frequency"``), including the ``stability_penalty`` and
-        ``weight_decay`` terms.
+        Cost per iteration: the squared simulation error on the fitted rows
+        (weighted spectra for ``cost="frequency"``) plus the
+        ``stability_penalty`` and ``weight_decay`` terms, divided by the
+        number of fitted residuals.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
         Mean squared simulation error on the held-out rows per iteration.
     best_iteration_ : int
