@@ -293,6 +293,7 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
     x_next = np.empty(n)
     current = np.zeros((n, n_moving))
     following = np.empty((n, n_moving))
+    output_row = np.empty(n_moving)
     for seq in range(starts.shape[0] - 1):
         for i in range(n):
             s[i] = x0[seq, i]
@@ -334,13 +335,17 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
             for i in range(n_y):
                 for j in range(n):
                     M[n + i, j] += C[i, j]
-            # Propagated part and direct dependence of the linear part.
+            # Propagated part and direct dependence of the linear part. The
+            # innermost loops run along the sensitivity columns (contiguous,
+            # so they vectorise); every entry sums its products in the order
+            # j = 0, 1, ... all the same.
             for i in range(n):
                 for c in range(n_moving):
-                    acc = 0.0
-                    for j in range(n):
-                        acc += M[i, j] * current[j, c]
-                    following[i, c] = acc
+                    following[i, c] = 0.0
+                for j in range(n):
+                    weight = M[i, j]
+                    for c in range(n_moving):
+                        following[i, c] += weight * current[j, c]
                 for j in range(n):
                     following[i, i * n + j] += s[j]
                 for j in range(n_u):
@@ -353,10 +358,13 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
                 out = J[row]
                 for i in range(n_y):
                     for c in range(n_moving):
-                        acc = 0.0
-                        for j in range(n):
-                            acc += M[n + i, j] * current[j, c]
-                        out[i, columns[c]] = acc
+                        output_row[c] = 0.0
+                    for j in range(n):
+                        weight = M[n + i, j]
+                        for c in range(n_moving):
+                            output_row[c] += weight * current[j, c]
+                    for c in range(n_moving):
+                        out[i, columns[c]] = output_row[c]
                     for j in range(n):
                         out[i, o_c + i * n + j] += s[j]
                     for j in range(n_u):
