@@ -178,9 +178,9 @@ def test_problem_jacobian_matches_central_differences(terms, options):
     r, J = problem.residual(theta, True)
     assert r is not None
     assert r.size > problem.fit_rows.sum()
-    # The penalty's rows are exact in A and the terms' parameters only (the
-    # states' own dependence is left out: Gauss-Newton), so the residual rows
-    # are compared there.
+    # The penalty's Jacobian leaves out the states' own dependence
+    # (Gauss-Newton), so with the penalty only the simulation-error rows are
+    # compared; its rows are checked in A and the terms' parameters below.
     n_compared = problem.n_residuals if "stability_penalty" in options else r.size
     J_fd = central_differences(lambda th: problem.residual(th, False)[0][:n_compared], theta)
     J = J[:n_compared]

@@ -367,8 +367,7 @@ class SimulationErrorProblem:
         inactive at most samples, and the optimiser's factorisation costs in
         proportion to the rows). Their Jacobian holds the direct
         dependence on A and on the terms' parameters (by central differences
-        in the states of the terms' parameter Jacobian, at the points where
-        the radius exceeds 1 only: elsewhere the rows are flat); the states' own
+        in the states of the terms' parameter Jacobian); the states' own
         dependence on the parameters is neglected (a Gauss-Newton-type
         approximation: the cost itself is exact, so every accepted step still
         lowers it).

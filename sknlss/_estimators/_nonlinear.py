@@ -255,6 +255,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
                                  validation_fraction=min(shares),
                                  steady_state_period=self.period).fit_rows.sum())
+        # The stability penalty has a row per fitted sample at most.
         n_rows = (n_samples * n_y + (n_samples if self.stability_penalty else 0)
                   + (n_terms if self.weight_decay else 0))
         concurrent = min(self.n_init, effective_n_jobs(self.n_jobs))
