@@ -36,6 +36,12 @@ structure and ``work`` a scratch array of the size the terms ask for:
   ``output_offset < 0`` means the output rows are not needed. It is called
   after the two others at the same point.
 
+The compiled helpers these functions call at every sample are declared
+``inline="always"``: a call that LLVM leaves out of line (a helper with
+several branches, such as the basis functions) costs tens of nanoseconds,
+more than the arithmetic of a small model, and inlining halved the
+simulation time of a one-branch NL-LFR model with the same results to the bit.
+
 **Forward sensitivities.** For a parameter theta_k, with
 ``x_k(t) = dx(t)/dtheta_k``,
 
@@ -109,7 +115,7 @@ def function_pointer(function, signature):
     return _POINTERS[key]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _escaped(values, count, bound):
     """Whether one of the first ``count`` values is not finite or exceeds
     ``bound`` in absolute value."""

@@ -14,7 +14,7 @@ from numba import njit
 _POWERS, _LEGENDRE, _CHEBYSHEV = 0, 1, 2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def basis_functions(code, degrees, z, out, o_values, o_slopes):
     """Values and derivatives of the basis functions of the given degrees at ``z``.
 
@@ -25,8 +25,8 @@ def basis_functions(code, degrees, z, out, o_values, o_slopes):
     ``o_values`` and ``o_slopes``, one entry per degree.
     """
     top = 0
-    for d in degrees:
-        top = max(top, d)
+    for k in range(degrees.shape[0]):
+        top = max(top, degrees[k])
     if code == _POWERS:
         for k in range(degrees.shape[0]):
             d = degrees[k]

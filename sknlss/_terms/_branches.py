@@ -25,7 +25,7 @@ from ._bases import basis_functions
 _HEADER = 3
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _layout(spec, n_vars):
     rank, n_fun = spec[0], spec[1]
     o_coef = n_vars * rank
@@ -74,7 +74,7 @@ def _state_jacobian(theta, spec, s, n, dh_dx, work):
             dh_dx[i, j] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, first_row, out, out_offset,
               with_w):
     """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V, c

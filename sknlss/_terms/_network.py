@@ -23,7 +23,7 @@ from .._core._model import Terms
 ACTIVATIONS = {"sigmoid": 0, "tanh": 1}
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _part_offsets(base, n_components, n_neurons, n_vars):
     """Offsets of W, b, v, c of a part (state or output networks) and its end."""
     n_hidden = n_components * n_neurons
@@ -33,7 +33,7 @@ def _part_offsets(base, n_components, n_neurons, n_vars):
     return base, o_b, o_v, o_c, o_c + n_components
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _activate(a, activation):
     """Unit output and its derivative for the pre-activation ``a``."""
     if activation == 0:
@@ -44,7 +44,7 @@ def _activate(a, activation):
     return value, 1.0 - value * value
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _evaluate_part(theta, base, n_components, n_neurons, activation, s, work, first_unit,
                    h, first_row):
     n_vars = s.shape[0]
@@ -63,7 +63,7 @@ def _evaluate_part(theta, base, n_components, n_neurons, activation, s, work, fi
         h[first_row + j] = acc_out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _state_jacobian_part(theta, base, n_components, n_neurons, n, n_vars, work,
                          first_unit, dh_dx, first_row):
     o_w, _, o_v, _, _ = _part_offsets(base, n_components, n_neurons, n_vars)
@@ -77,7 +77,7 @@ def _state_jacobian_part(theta, base, n_components, n_neurons, n, n_vars, work,
             dh_dx[first_row + j, i] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _parameter_jacobian_part(theta, base, n_components, n_neurons, s, work, first_unit,
                              out, out_offset):
     n_vars = s.shape[0]

@@ -174,21 +174,23 @@ def monomial_exponents(n_states, n_inputs, degree, structure="full"):
 # The monomials are evaluated from integer tables (the "spec") built once per
 # exponent array, into a flat scratch array ("work"):
 #
-# spec = [n_vars, n_monomials, width, n_factors, n_diff,
-#         factors (n_monomials x n_factors),
-#         derivative rows (n_monomials x n_diff x (n_factors + 1))]
+# spec = [n_vars, n_monomials, width, n_factors, n_diff, n_entries,
+#         factors (n_monomials x (n_factors + 1)),
+#         derivative entries (n_entries x (n_factors + 2))]
 # work = [powers (n_vars x width), monomials (n_monomials),
 #         derivatives (n_monomials x n_diff)]
 #
-# with ``work[j * width + p] = s_j ** p``. Row k of ``factors`` holds the
-# positions in work of the powers whose product is monomial k, in the order of
-# the variables, padded with position 0 (``s_0 ** 0 = 1``). The derivative row
-# of monomial k and variable i holds the exponent e of s_i, the position of
-# ``s_i ** (e - 1)`` and those of the other factors (all padding when e = 0).
-# Every monomial is then a fixed number of products without branches, and the
-# compiled functions index the flat arrays directly: views made at every
-# sample would cost more than the arithmetic.
-_HEADER = 5
+# with ``work[j * width + p] = s_j ** p`` and n_factors the largest number of
+# variables in a monomial. Row k of ``factors`` holds the number of variables
+# of monomial k, then the positions in work of their powers, whose product is
+# the monomial, in the order of the variables. There is a derivative entry for
+# each monomial k and variable i that it contains: the position
+# ``k * n_diff + i`` of the derivative, the exponent e of s_i, the position of
+# ``s_i ** (e - 1)`` and those of the other factors, padded with position 0
+# (``s_0 ** 0 = 1``); the derivatives of the monomials without s_i are zero
+# and never computed. The compiled functions index the flat arrays directly:
+# views made at every sample would cost more than the arithmetic.
+_HEADER = 6
 
 
 def _monomial_spec(exponents, n_diff):
@@ -198,26 +200,28 @@ def _monomial_spec(exponents, n_diff):
     n_monomials, n_vars = exponents.shape
     width = _max_degree(exponents) + 1
     n_factors = max(1, int(np.count_nonzero(exponents, axis=1).max(initial=0)))
-    factors = np.zeros((n_monomials, n_factors), dtype=np.int64)
-    derivatives = np.zeros((n_monomials, n_diff, n_factors + 1), dtype=np.int64)
+    factors = np.zeros((n_monomials, n_factors + 1), dtype=np.int64)
+    entries = []
     for k, row in enumerate(exponents):
         present = [(j, int(e)) for j, e in enumerate(row) if e]
-        factors[k, : len(present)] = [j * width + e for j, e in present]
+        factors[k, : len(present) + 1] = [len(present), *(j * width + e for j, e in present)]
         for i in range(n_diff):
             if row[i]:
                 others = [j * width + e for j, e in present if j != i]
-                derivatives[k, i, : 2 + len(others)] = [row[i], i * width + row[i] - 1,
-                                                        *others]
-    header = [n_vars, n_monomials, width, n_factors, n_diff]
-    return np.concatenate([header, factors.ravel(), derivatives.ravel()]).astype(np.int64)
+                entry = np.zeros(n_factors + 2, dtype=np.int64)
+                entry[: 3 + len(others)] = [k * n_diff + i, row[i], i * width + row[i] - 1,
+                                            *others]
+                entries.append(entry)
+    header = [n_vars, n_monomials, width, n_factors, n_diff, len(entries)]
+    return np.concatenate([header, factors.ravel(), *entries]).astype(np.int64)
 
 
 def _work_size(spec):
-    n_vars, n_monomials, width, _, n_diff = spec[:_HEADER]
+    n_vars, n_monomials, width, _, n_diff, _ = spec[:_HEADER]
     return int(n_vars * width + n_monomials * (1 + n_diff))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fill_monomials(spec, s, work):
     """Powers of ``s`` and the monomials, into work."""
     n_vars, n_monomials, width, n_factors = spec[0], spec[1], spec[2], spec[3]
@@ -229,26 +233,26 @@ def _fill_monomials(spec, s, work):
     o_values = n_vars * width
     for k in range(n_monomials):
         value = 1.0
-        row = _HEADER + k * n_factors
-        for f in range(n_factors):
-            value *= work[spec[row + f]]
+        row = _HEADER + k * (n_factors + 1)
+        for f in range(spec[row]):
+            value *= work[spec[row + 1 + f]]
         work[o_values + k] = value
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fill_derivatives(spec, work):
-    """Derivatives of the monomials, into work (after :func:`_fill_monomials`)."""
-    n_vars, n_monomials, width, n_factors, n_diff = (spec[0], spec[1], spec[2], spec[3],
-                                                     spec[4])
-    o_rows = _HEADER + n_monomials * n_factors
+    """The nonzero derivatives of the monomials, into work (after
+    :func:`_fill_monomials`); the others are left as they were."""
+    n_vars, n_monomials, width, n_factors, n_entries = (spec[0], spec[1], spec[2], spec[3],
+                                                        spec[5])
+    o_entries = _HEADER + n_monomials * (n_factors + 1)
     o_out = n_vars * width + n_monomials
-    for k in range(n_monomials):
-        for i in range(n_diff):
-            row = o_rows + (k * n_diff + i) * (n_factors + 1)
-            value = spec[row] * work[spec[row + 1]]
-            for f in range(n_factors - 1):
-                value *= work[spec[row + 2 + f]]
-            work[o_out + k * n_diff + i] = value
+    for q in range(n_entries):
+        row = o_entries + q * (n_factors + 2)
+        value = spec[row + 1] * work[spec[row + 2]]
+        for f in range(n_factors - 1):
+            value *= work[spec[row + 3 + f]]
+        work[o_out + spec[row]] = value
 
 
 def _max_degree(exponents):
@@ -272,6 +276,7 @@ def _batch_derivatives(S, spec, work):
     n_vars, n_monomials, width = spec[0], spec[1], spec[2]
     o_out = n_vars * width + n_monomials
     derivatives = np.empty((S.shape[0], n_monomials, n_vars))
+    work[o_out:] = 0.0
     for t in range(S.shape[0]):
         _fill_monomials(spec, S[t], work)
         _fill_derivatives(spec, work)
@@ -325,74 +330,98 @@ def monomial_jacobian(S, exponents):
 
 
 # ------------------------------------------------------------------ the terms
-# The terms' spec is the monomials' spec of [state exponents; output
-# exponents] (zeta first, then eta) followed by n_zeta; derivatives are taken
-# with respect to the states.
+# zeta and eta usually hold the same monomials (the "full" structures of both
+# equations), so each distinct monomial is evaluated once. The terms' spec is
+#
+#   [monomials' spec of the distinct rows of [state exponents; output exponents],
+#    positions of the zeta monomials among them (n_zeta), those of eta (n_eta),
+#    for each state j the zeta monomials that contain x_j (n_states + 1 bounds,
+#    then the indices), the same for eta,
+#    the offsets in spec of these four tables, n_zeta, n_eta]
+#
+# Derivatives are taken with respect to the states, and the sums of the state
+# Jacobian skip the monomials without x_j: their terms are exact zeros.
+_TAIL = 6
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _offsets(spec):
-    """n_zeta and the offsets of the monomials and their derivatives in work."""
+    """n_zeta, n_eta, the offsets in spec of the zeta and eta positions, and
+    the offsets in work of the monomials and of their derivatives."""
     n_vars, n_monomials, width = spec[0], spec[1], spec[2]
+    end = spec.shape[0]
     o_values = n_vars * width
-    return spec[spec.shape[0] - 1], o_values, o_values + n_monomials
+    return (spec[end - 2], spec[end - 1], spec[end - _TAIL], spec[end - _TAIL + 1], o_values,
+            o_values + n_monomials)
+
+
+def _containing(exponents, n_states):
+    """For each state j, the rows of ``exponents`` with a nonzero power of
+    x_j: bounds (n_states + 1) and row indices."""
+    rows = [np.flatnonzero(exponents[:, j]) for j in range(n_states)]
+    bounds = np.concatenate([[0], np.cumsum([len(r) for r in rows], dtype=np.int64)])
+    return bounds, np.concatenate([np.zeros(0, dtype=np.int64), *rows])
 
 
 @njit(EVALUATE, cache=True)
 def _evaluate(theta, spec, s, n, h, work):
-    n_zeta, o_zeta, _ = _offsets(spec)
-    n_eta = spec[1] - n_zeta
-    o_eta = o_zeta + n_zeta
+    n_zeta, n_eta, o_zeta, o_eta, o_values, _ = _offsets(spec)
     _fill_monomials(spec, s, work)
     o_f = n * n_zeta
     for i in range(n):
         acc = 0.0
         for k in range(n_zeta):
-            acc += theta[i * n_zeta + k] * work[o_zeta + k]
+            acc += theta[i * n_zeta + k] * work[o_values + spec[o_zeta + k]]
         h[i] = acc
     for i in range(h.shape[0] - n):
         acc = 0.0
         for k in range(n_eta):
-            acc += theta[o_f + i * n_eta + k] * work[o_eta + k]
+            acc += theta[o_f + i * n_eta + k] * work[o_values + spec[o_eta + k]]
         h[n + i] = acc
+
+
+@njit(cache=True, inline="always")
+def _sparse_rows(theta, o_theta, n_columns, spec, o_positions, o_bounds, n, work, o_slopes,
+                 dh_dx, first_row, n_rows):
+    """Rows ``first_row:first_row + n_rows`` of dh/dx for the coefficients
+    ``theta[o_theta:]`` (``n_columns`` per row) of the monomials listed at
+    ``o_positions``, with the table of those containing each state at
+    ``o_bounds``."""
+    o_indices = o_bounds + n + 1
+    for r in range(n_rows):
+        o_row = o_theta + r * n_columns
+        for j in range(n):
+            acc = 0.0
+            for q in range(spec[o_bounds + j], spec[o_bounds + j + 1]):
+                k = spec[o_indices + q]
+                acc += theta[o_row + k] * work[o_slopes + spec[o_positions + k] * n + j]
+            dh_dx[first_row + r, j] = acc
 
 
 @njit(STATE_JACOBIAN, cache=True)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
-    n_zeta, _, o_dzeta = _offsets(spec)
-    n_eta = spec[1] - n_zeta
-    o_deta = o_dzeta + n_zeta * n
+    n_zeta, n_eta, o_zeta, o_eta, _, o_slopes = _offsets(spec)
+    end = spec.shape[0]
     _fill_derivatives(spec, work)
-    o_f = n * n_zeta
-    for i in range(n):
-        for j in range(n):
-            acc = 0.0
-            for k in range(n_zeta):
-                acc += theta[i * n_zeta + k] * work[o_dzeta + k * n + j]
-            dh_dx[i, j] = acc
-    for i in range(dh_dx.shape[0] - n):
-        for j in range(n):
-            acc = 0.0
-            for k in range(n_eta):
-                acc += theta[o_f + i * n_eta + k] * work[o_deta + k * n + j]
-            dh_dx[n + i, j] = acc
+    _sparse_rows(theta, 0, n_zeta, spec, o_zeta, spec[end - _TAIL + 2], n, work, o_slopes,
+                 dh_dx, 0, n)
+    _sparse_rows(theta, n * n_zeta, n_eta, spec, o_eta, spec[end - _TAIL + 3], n, work,
+                 o_slopes, dh_dx, n, dh_dx.shape[0] - n)
 
 
 @njit(PARAMETER_JACOBIAN, cache=True)
 def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
                         output_offset):
-    n_zeta, o_zeta, _ = _offsets(spec)
-    n_eta = spec[1] - n_zeta
-    o_eta = o_zeta + n_zeta
+    n_zeta, n_eta, o_zeta, o_eta, o_values, _ = _offsets(spec)
     for i in range(n):
         for k in range(n_zeta):
-            state_out[i, state_offset + i * n_zeta + k] += work[o_zeta + k]
+            state_out[i, state_offset + i * n_zeta + k] += work[o_values + spec[o_zeta + k]]
     if output_offset < 0:
         return
     o_f = output_offset + n * n_zeta
     for i in range(output_out.shape[0]):
         for k in range(n_eta):
-            output_out[i, o_f + i * n_eta + k] += work[o_eta + k]
+            output_out[i, o_f + i * n_eta + k] += work[o_values + spec[o_eta + k]]
 
 
 class PolynomialTerms(Terms):
@@ -416,7 +445,14 @@ class PolynomialTerms(Terms):
         n_zeta, n_eta = (len(e) for e in self.exponents)
         n_vars = self.exponents[0].shape[1]
         self.blocks = [("E", (n_states, n_zeta)), ("F", (n_outputs, n_eta))]
-        monomials = _monomial_spec(np.vstack(self.exponents).reshape(-1, n_vars), n_states)
-        self.spec = np.append(monomials, n_zeta)
+        distinct, positions = np.unique(np.vstack(self.exponents).reshape(-1, n_vars),
+                                        axis=0, return_inverse=True)
+        monomials = _monomial_spec(distinct, n_states)
+        tables = [positions.ravel()[:n_zeta], positions.ravel()[n_zeta:],
+                  *_containing(self.exponents[0], n_states),
+                  *_containing(self.exponents[1], n_states)]
+        offsets = len(monomials) + np.cumsum([0] + [len(t) for t in tables[:-1]])
+        self.spec = np.concatenate([monomials, *tables, offsets[[0, 1, 2, 4]],
+                                    [n_zeta, n_eta]]).astype(np.int64)
         self.work_size = _work_size(monomials)
         self.n_state_params = n_states * n_zeta
