@@ -104,8 +104,10 @@ def test_local_jacobians_and_curvature_match_central_differences(terms):
     np.testing.assert_allclose(contraction, expected, atol=1e-6 * np.abs(expected).max())
 
 
-def test_polynomial_terms_match_plain_numpy():
-    model, theta = _model("polynomial", DIMS["MIMO"])
+# The two structures share some monomials: each distinct one is evaluated once.
+@pytest.mark.parametrize("terms", ["polynomial", "polynomial-states"])
+def test_polynomial_terms_match_plain_numpy(terms):
+    model, theta = _model(terms, DIMS["MIMO"])
     U, starts = _data(2)
     values = model.unpack(theta)
     exponents = model.terms.exponents
