@@ -25,8 +25,8 @@ def basis_functions(code, degrees, z, out, o_values, o_slopes):
     ``o_values`` and ``o_slopes``, one entry per degree.
     """
     top = 0
-    for k in range(degrees.shape[0]):
-        top = max(top, degrees[k])
+    for d in degrees:
+        top = max(top, d)
     if code == _POWERS:
         for k in range(degrees.shape[0]):
             d = degrees[k]

@@ -337,7 +337,8 @@ def monomial_jacobian(S, exponents):
 #    positions of the zeta monomials among them (n_zeta), those of eta (n_eta),
 #    for each state j the zeta monomials that contain x_j (n_states + 1 bounds,
 #    then the indices), the same for eta,
-#    the offsets in spec of these four tables, n_zeta, n_eta]
+#    the offsets in spec of the zeta positions, the eta positions, the zeta
+#    bounds and the eta bounds, then n_zeta, n_eta]
 #
 # Derivatives are taken with respect to the states, and the sums of the state
 # Jacobian skip the monomials without x_j: their terms are exact zeros.
@@ -346,13 +347,14 @@ _TAIL = 6
 
 @njit(cache=True, inline="always")
 def _offsets(spec):
-    """n_zeta, n_eta, the offsets in spec of the zeta and eta positions, and
-    the offsets in work of the monomials and of their derivatives."""
+    """n_zeta, n_eta, the offsets in spec of the zeta and eta positions and of
+    their tables of monomials by state, and the offsets in work of the
+    monomials and of their derivatives."""
     n_vars, n_monomials, width = spec[0], spec[1], spec[2]
-    end = spec.shape[0]
+    o_tail = spec.shape[0] - _TAIL
     o_values = n_vars * width
-    return (spec[end - 2], spec[end - 1], spec[end - _TAIL], spec[end - _TAIL + 1], o_values,
-            o_values + n_monomials)
+    return (spec[o_tail + 4], spec[o_tail + 5], spec[o_tail], spec[o_tail + 1],
+            spec[o_tail + 2], spec[o_tail + 3], o_values, o_values + n_monomials)
 
 
 def _containing(exponents, n_states):
@@ -365,7 +367,7 @@ def _containing(exponents, n_states):
 
 @njit(EVALUATE, cache=True)
 def _evaluate(theta, spec, s, n, h, work):
-    n_zeta, n_eta, o_zeta, o_eta, o_values, _ = _offsets(spec)
+    n_zeta, n_eta, o_zeta, o_eta, _, _, o_values, _ = _offsets(spec)
     _fill_monomials(spec, s, work)
     o_f = n * n_zeta
     for i in range(n):
@@ -400,19 +402,17 @@ def _sparse_rows(theta, o_theta, n_columns, spec, o_positions, o_bounds, n, work
 
 @njit(STATE_JACOBIAN, cache=True)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
-    n_zeta, n_eta, o_zeta, o_eta, _, o_slopes = _offsets(spec)
-    end = spec.shape[0]
+    n_zeta, n_eta, o_zeta, o_eta, o_zeta_bounds, o_eta_bounds, _, o_slopes = _offsets(spec)
     _fill_derivatives(spec, work)
-    _sparse_rows(theta, 0, n_zeta, spec, o_zeta, spec[end - _TAIL + 2], n, work, o_slopes,
-                 dh_dx, 0, n)
-    _sparse_rows(theta, n * n_zeta, n_eta, spec, o_eta, spec[end - _TAIL + 3], n, work,
-                 o_slopes, dh_dx, n, dh_dx.shape[0] - n)
+    _sparse_rows(theta, 0, n_zeta, spec, o_zeta, o_zeta_bounds, n, work, o_slopes, dh_dx, 0, n)
+    _sparse_rows(theta, n * n_zeta, n_eta, spec, o_eta, o_eta_bounds, n, work, o_slopes,
+                 dh_dx, n, dh_dx.shape[0] - n)
 
 
 @njit(PARAMETER_JACOBIAN, cache=True)
 def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
                         output_offset):
-    n_zeta, n_eta, o_zeta, o_eta, o_values, _ = _offsets(spec)
+    n_zeta, n_eta, o_zeta, o_eta, _, _, o_values, _ = _offsets(spec)
     for i in range(n):
         for k in range(n_zeta):
             state_out[i, state_offset + i * n_zeta + k] += work[o_values + spec[o_zeta + k]]
@@ -448,11 +448,14 @@ class PolynomialTerms(Terms):
         distinct, positions = np.unique(np.vstack(self.exponents).reshape(-1, n_vars),
                                         axis=0, return_inverse=True)
         monomials = _monomial_spec(distinct, n_states)
-        tables = [positions.ravel()[:n_zeta], positions.ravel()[n_zeta:],
-                  *_containing(self.exponents[0], n_states),
-                  *_containing(self.exponents[1], n_states)]
-        offsets = len(monomials) + np.cumsum([0] + [len(t) for t in tables[:-1]])
-        self.spec = np.concatenate([monomials, *tables, offsets[[0, 1, 2, 4]],
+        positions = positions.ravel()
+        zeta_bounds, zeta_indices = _containing(self.exponents[0], n_states)
+        eta_bounds, eta_indices = _containing(self.exponents[1], n_states)
+        # Each bounds table is followed by its indices, which _sparse_rows finds there.
+        tables = [positions[:n_zeta], positions[n_zeta:], zeta_bounds, zeta_indices,
+                  eta_bounds, eta_indices]
+        starts = len(monomials) + np.cumsum([0] + [len(t) for t in tables[:-1]])
+        self.spec = np.concatenate([monomials, *tables, starts[[0, 1, 2, 4]],
                                     [n_zeta, n_eta]]).astype(np.int64)
         self.work_size = _work_size(monomials)
         self.n_state_params = n_states * n_zeta
