@@ -31,6 +31,10 @@ TERMS = {
     "branches-legendre": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 2, LegendreBasis(3)),
     "branches-chebyshev": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 1,
                                                           ChebyshevBasis(4)),
+    # Ranges that the branch inputs of the test data leave on both sides.
+    "branches-continued": lambda n, n_u, n_y: BranchTerms(
+        n, n_u, n_y, 2, PolynomialBasis(3), input_range=np.array([[-0.02, -0.01],
+                                                                 [0.01, 0.03]])),
 }
 DIMS = {"SISO": (2, 1, 1), "MIMO": (3, 2, 2)}
 

@@ -40,6 +40,29 @@ def test_branch_terms_follow_the_equations():
     assert X.shape == (5, 2)
 
 
+def test_branch_terms_continue_along_tangents_beyond_their_input_range():
+    rng = np.random.default_rng(3)
+    basis = PolynomialBasis(3)
+    input_range = np.array([[-0.1, -0.3], [0.2, 0.1]])
+    model = StateSpaceModel(2, 1, 1, BranchTerms(2, 1, 1, 2, basis, input_range))
+    values = {name: 0.3 * rng.standard_normal(shape) for name, shape in model.blocks}
+    values["A"] = 0.5 * np.eye(2)
+    U = 2.0 * rng.standard_normal((40, 1))
+    x0 = np.array([0.1, -0.2])
+    Y, X, _ = model.simulate(model.pack(values), U, np.array([0, 40]), x0=x0)
+    Z = np.hstack([X, U]) @ values["V"]
+    assert np.any(Z < input_range[0]) and np.any(Z > input_range[1])
+    inside = np.clip(Z, *input_range)
+    g = np.empty_like(Z)
+    for l in range(2):
+        phi, slopes = basis.evaluate(inside[:, l])
+        c = values["coefficients"][l]
+        g[:, l] = phi @ c + (slopes @ c) * (Z[:, l] - inside[:, l])
+    C, D, W = values["C"], values["D"], values["W"]
+    expected = X @ C.T + U @ D.T + g @ W[2:].T
+    np.testing.assert_allclose(Y, expected, rtol=1e-12, atol=1e-14)
+
+
 def test_stack_polynomials_takes_the_union_of_monomials():
     E = np.array([[1.0, 2.0]])
     F = np.array([[3.0, 4.0]])
@@ -100,6 +123,8 @@ def test_fitted_attributes(wiener_model):
     assert model.V_.shape == (n + n_u, rank)
     assert model.W_.shape == (n + n_y, rank)
     assert model.branch_coefficients_.shape == (rank, d - 1)
+    lower, upper = model.branch_input_range_
+    assert lower.shape == (rank,) and np.all(lower < upper)
     assert model.n_params_ == n * n + n * n_u + n_y * n + n_y * n_u + (
         n + n_u + n + n_y + d - 1) * rank
     assert model.n_iter_ == len(model.loss_history_) - 1

@@ -1,5 +1,7 @@
 """NL-LFR estimator and the bases of its static nonlinearity."""
 
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.base import clone
@@ -11,6 +13,7 @@ from sknlss import (
     NLLFRRegressor,
     PolynomialBasis,
 )
+from sknlss.exceptions import SimulationDivergedWarning
 from sknlss.metrics import rms_error
 
 pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
@@ -66,6 +69,26 @@ def test_bases(basis, records):
     assert model.coefficients_.shape == (2, basis.n_functions)
     assert model.score(u, y) > 0.9
     assert clone(model).basis == basis
+
+
+def test_extrapolation_changes_only_predictions_beyond_the_estimation_range(records):
+    u, y, u_test, _ = records
+    options = dict(n_states=2, max_iter=10, random_state=0)
+    linear = NLLFRRegressor(extrapolation="linear", **options).fit(u, y)
+    continued = NLLFRRegressor(extrapolation="continue", **options).fit(u, y)
+    np.testing.assert_array_equal(linear.predict(u), continued.predict(u))
+    np.testing.assert_array_equal(continued.branch_input_range_, [[-np.inf], [np.inf]])
+    # The range of the branch input z = Cz x + Dz u on the estimation record.
+    # The range of the branch input z = Cz x + Dz u on the estimation record
+    # (normalised signals).
+    states = linear.simulate(u, return_states=True)[1]
+    z = states @ linear.Cz_.T + (u - linear.u_offset_) / linear.u_scale_ @ linear.Dz_.T
+    np.testing.assert_allclose(linear.branch_input_range_, [[z.min()], [z.max()]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SimulationDivergedWarning)
+        beyond = continued.predict(4.0 * u_test)
+    assert np.all(np.isfinite(linear.predict(4.0 * u_test)))
+    assert not np.allclose(linear.predict(4.0 * u_test), beyond, equal_nan=True)
 
 
 def test_bounded_bases_stay_bounded():

@@ -21,7 +21,9 @@ by all sequences). The terms' parameters ``theta_terms`` are laid out by the
 terms object that owns them.
 
 **The terms contract.** With ``spec`` an integer array describing the terms'
-structure and ``work`` a scratch array of the size the terms ask for:
+structure and ``work`` a work array that every kernel call starts as a copy
+of the terms' ``work_init`` (constants the terms read, such as the range of a
+branch input, then scratch space):
 
 - ``evaluate(theta_terms, spec, s, n_states, h, work)`` writes ``h(s)``;
 - ``state_jacobian(theta_terms, spec, s, n_states, dh_dx, work)`` writes the
@@ -142,11 +144,11 @@ def _linear_part(theta, n, n_u, n_y):
 
 @njit(
     types.Tuple((_F2, _F2, types.boolean))(
-        _F1, _INT, _INT, _I1, _INT, _F2, _I1, _F2, types.FunctionType(EVALUATE)
+        _F1, _INT, _INT, _I1, _F1, _F2, _I1, _F2, types.FunctionType(EVALUATE)
     ),
     cache=True,
 )
-def simulate(theta, n_outputs, n_terms, spec, work_size, U, starts, x0, evaluate):
+def simulate(theta, n_outputs, n_terms, spec, work_init, U, starts, x0, evaluate):
     """Free-run simulation of every sequence.
 
     Parameters
@@ -157,8 +159,8 @@ def simulate(theta, n_outputs, n_terms, spec, work_size, U, starts, x0, evaluate
         Number of outputs and of the terms' parameters.
     spec : ndarray of int64
         Structure of the terms.
-    work_size : int
-        Size of the terms' scratch array.
+    work_init : ndarray of shape (work_size,)
+        Initial content of the terms' work array (see the terms contract).
     U : ndarray of shape (n_samples, n_inputs)
     starts : ndarray of int64 of shape (n_sequences + 1,)
     x0 : ndarray of shape (n_sequences, n_states)
@@ -185,7 +187,7 @@ def simulate(theta, n_outputs, n_terms, spec, work_size, U, starts, x0, evaluate
     # 10-15 % faster than the same code through views and helpers.
     s = np.empty(n + n_u)
     h = np.empty(n + n_y)
-    work = np.empty(work_size)
+    work = work_init.copy()
     x_next = np.empty(n)
     diverged = False
     for seq in range(starts.shape[0] - 1):
@@ -227,13 +229,13 @@ def simulate(theta, n_outputs, n_terms, spec, work_size, U, starts, x0, evaluate
 
 @njit(
     types.Tuple((_F2, _F2, _F3, _F3, types.boolean))(
-        _F1, _INT, _INT, _INT, _I1, _INT, _F2, _I1, _F2, types.boolean, _I1, types.boolean,
+        _F1, _INT, _INT, _INT, _I1, _F1, _F2, _I1, _F2, types.boolean, _I1, types.boolean,
         types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
         types.FunctionType(PARAMETER_JACOBIAN),
     ),
     cache=True,
 )
-def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, starts,
+def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, starts,
                   x0, estimate_x0, jacobian_rows, with_local, evaluate, state_jacobian,
                   parameter_jacobian):
     """Simulated outputs and states, and the outputs' Jacobian with respect to theta.
@@ -301,7 +303,7 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
     # As in simulate, s = [x; u] holds the current state.
     s = np.empty(n + n_u)
     h = np.empty(n + n_y)
-    work = np.empty(work_size)
+    work = work_init.copy()
     M = np.empty((n + n_y, n))
     x_next = np.empty(n)
     current = np.zeros((n, n_moving))
@@ -398,17 +400,17 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_size, U, 
 
 
 @njit(
-    _F3(_F1, _INT, _INT, _INT, _I1, _INT, _F2, types.FunctionType(EVALUATE),
+    _F3(_F1, _INT, _INT, _INT, _I1, _F1, _F2, types.FunctionType(EVALUATE),
         types.FunctionType(STATE_JACOBIAN)),
     cache=True,
 )
-def local_jacobians(theta, n_states, n_outputs, n_terms, spec, work_size, S, evaluate,
+def local_jacobians(theta, n_states, n_outputs, n_terms, spec, work_init, S, evaluate,
                     state_jacobian):
     """Jacobians of ``[x(t+1); y(t)]`` with respect to ``x(t)`` at the points ``S``.
 
     Parameters
     ----------
-    theta, n_outputs, n_terms, spec, work_size, evaluate, state_jacobian
+    theta, n_outputs, n_terms, spec, work_init, evaluate, state_jacobian
         As in :func:`sensitivities`.
     n_states : int
         Number of states.
@@ -424,7 +426,7 @@ def local_jacobians(theta, n_states, n_outputs, n_terms, spec, work_size, S, eva
     A, B, C, D, o_terms = _linear_part(theta, n, S.shape[1] - n, n_y)
     theta_terms = theta[o_terms : o_terms + n_terms]
     h = np.empty(n + n_y)
-    work = np.empty(work_size)
+    work = work_init.copy()
     out = np.empty((S.shape[0], n + n_y, n))
     s = np.empty(S.shape[1])
     for t in range(S.shape[0]):
@@ -441,13 +443,13 @@ def local_jacobians(theta, n_states, n_outputs, n_terms, spec, work_size, S, eva
 
 
 @njit(
-    _F2(_F1, _INT, _INT, _INT, _INT, _I1, _INT, _F2, _F3, types.float64,
+    _F2(_F1, _INT, _INT, _INT, _INT, _I1, _F1, _F2, _F3, types.float64,
         types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
         types.FunctionType(PARAMETER_JACOBIAN)),
     cache=True,
 )
 def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, spec,
-                          work_size, S, G, step, evaluate, state_jacobian,
+                          work_init, S, G, step, evaluate, state_jacobian,
                           parameter_jacobian):
     """``sum_ij G[t, i, j] d^2 h_x,i / dx_j dtheta_k`` at the points ``S``.
 
@@ -458,7 +460,7 @@ def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, sp
 
     Parameters
     ----------
-    theta, n_outputs, n_terms, n_state_terms, spec, work_size
+    theta, n_outputs, n_terms, n_state_terms, spec, work_init
         As in :func:`sensitivities`.
     n_states : int
     S : ndarray of shape (n_points, n_states + n_inputs)
@@ -479,7 +481,7 @@ def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, sp
     theta_terms = theta[o_terms : o_terms + n_terms]
     h = np.empty(n + n_y)
     dh_dx = np.empty((n + n_y, n))
-    work = np.empty(work_size)
+    work = work_init.copy()
     upper = np.empty((n, n_state_terms))
     lower = np.empty((n, n_state_terms))
     unused = np.empty((n_y, 1))
@@ -502,11 +504,11 @@ def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, sp
 
 
 @njit(
-    _F1(_F1, _INT, _INT, _INT, _INT, _I1, _INT, _F2, types.FunctionType(EVALUATE),
+    _F1(_F1, _INT, _INT, _INT, _INT, _I1, _F1, _F2, types.FunctionType(EVALUATE),
         types.FunctionType(STATE_JACOBIAN), types.FunctionType(PARAMETER_JACOBIAN)),
     cache=True,
 )
-def parameter_rms(theta, n_states, n_outputs, n_terms, n_state_terms, spec, work_size, S,
+def parameter_rms(theta, n_states, n_outputs, n_terms, n_state_terms, spec, work_init, S,
                   evaluate, state_jacobian, parameter_jacobian):
     """RMS over the points ``S`` of the direct derivative of ``h`` with respect
     to each of the terms' parameters (the size of each parameter's
@@ -521,7 +523,7 @@ def parameter_rms(theta, n_states, n_outputs, n_terms, n_state_terms, spec, work
     theta_terms = theta[o_terms : o_terms + n_terms]
     h = np.empty(n + n_y)
     dh_dx = np.empty((n + n_y, n))
-    work = np.empty(work_size)
+    work = work_init.copy()
     state_out = np.empty((n, n_state_terms))
     output_out = np.empty((n_y, n_terms))
     s = np.empty(S.shape[1])

@@ -35,7 +35,9 @@ class Terms:
 
     Subclasses set ``blocks`` (list of ``(name, shape)`` of the terms'
     parameter blocks, in the order of ``theta_terms``), ``spec`` (int64
-    structure array read by the compiled functions), ``work_size`` and the
+    structure array read by the compiled functions), ``work_size`` (or
+    ``work_init``, the initial content of the work array, when the terms keep
+    constants there) and the
     three compiled functions ``evaluate``, ``state_jacobian`` and
     ``parameter_jacobian``, and ``n_state_params``: the number of the
     terms' parameters that enter ``h_x`` (they come first in ``theta_terms``).
@@ -45,6 +47,12 @@ class Terms:
     spec = np.zeros(1, dtype=np.int64)
     work_size = 0
     n_state_params = 0
+
+    @property
+    def work_init(self):
+        """Initial content of the work array of every kernel call."""
+        return np.zeros(self.work_size)
+
     evaluate = staticmethod(_kernels.no_terms_evaluate)
     state_jacobian = staticmethod(_kernels.no_terms_state_jacobian)
     parameter_jacobian = staticmethod(_kernels.no_terms_parameter_jacobian)
@@ -152,7 +160,7 @@ class StateSpaceModel:
         terms = self.terms
         return _kernels.simulate(
             _array(theta), self.n_outputs, self.n_terms,
-            _array(terms.spec, np.int64), terms.work_size, *_contiguous(U, starts),
+            _array(terms.spec, np.int64), terms.work_init, *_contiguous(U, starts),
             self.initial_states(theta, len(starts) - 1, x0), _pointers(terms)[0],
         )
 
@@ -163,7 +171,7 @@ class StateSpaceModel:
         terms = self.terms
         return _kernels.sensitivities(
             _array(theta), self.n_outputs, self.n_terms,
-            terms.n_state_params, _array(terms.spec, np.int64), terms.work_size, *_contiguous(U, starts),
+            terms.n_state_params, _array(terms.spec, np.int64), terms.work_init, *_contiguous(U, starts),
             self.initial_states(theta, len(starts) - 1, x0), self.estimate_x0,
             _array(jacobian_rows, np.int64), with_local, *_pointers(terms),
         )
@@ -174,7 +182,7 @@ class StateSpaceModel:
         terms = self.terms
         return _kernels.local_jacobians(
             _array(theta), self.n_states, self.n_outputs,
-            self.n_terms, _array(terms.spec, np.int64), terms.work_size,
+            self.n_terms, _array(terms.spec, np.int64), terms.work_init,
             _array(S), *_pointers(terms)[:2],
         )
 
@@ -185,7 +193,7 @@ class StateSpaceModel:
         terms = self.terms
         return _kernels.curvature_contraction(
             _array(theta), self.n_states, self.n_outputs,
-            self.n_terms, terms.n_state_params, _array(terms.spec, np.int64), terms.work_size,
+            self.n_terms, terms.n_state_params, _array(terms.spec, np.int64), terms.work_init,
             _array(S),
             _array(G), float(step), *_pointers(terms),
         )
@@ -196,6 +204,6 @@ class StateSpaceModel:
         terms = self.terms
         return _kernels.parameter_rms(
             _array(theta), self.n_states, self.n_outputs, self.n_terms,
-            terms.n_state_params, _array(terms.spec, np.int64), terms.work_size, _array(S),
+            terms.n_state_params, _array(terms.spec, np.int64), terms.work_init, _array(S),
             *_pointers(terms),
         )

@@ -20,7 +20,7 @@ from .._terms._branches import BranchTerms
 from .._terms._cpd import decouple_polynomial
 from .._validation import Integers
 from ._base import _unfitted_on_error
-from ._nonlinear import _BaseNonlinearStateSpace
+from ._nonlinear import _BaseNonlinearStateSpace, branch_prediction_terms
 from ._pnlss import PNLSSRegressor
 
 # Factors applied to W when the decoupled initial model diverges on the
@@ -111,6 +111,13 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         simulated ``[x; u]`` on the fitted rows, or points drawn from that
         trajectory itself. The PNLSS states are not normalised, so a standard
         normal distribution could miss the region where the model operates.
+    extrapolation : {"linear", "continue"}, default="linear"
+        How each branch function goes on beyond the range its input took on
+        the estimation record (``branch_input_range_``): along its tangent at
+        the nearer end of that range, so that where the data did not go the
+        branch grows no faster than linearly, or as the basis combination
+        itself (a polynomial keeps its curvature). The fit is the same either
+        way; only predictions beyond that range differ.
     estimate_x0 : bool, default=False
         Estimate the initial state (shared by all sequences, forwarded to the
         PNLSS model); ``predict`` then starts from ``x0_``.
@@ -193,6 +200,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Output transformation, ``W_x`` stacked over ``W_y``.
     branch_coefficients_ : ndarray of shape (rank, branch_degree - 1)
         ``branch_coefficients_[l, k]`` multiplies ``(v_l^T s)**(k + 2)``.
+    branch_input_range_ : ndarray of shape (2, rank)
+        Lowest and highest value of each branch input on the estimation
+        record simulated by the fitted model (``-inf`` and ``inf`` with
+        ``extrapolation="continue"``).
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
     pnlss_ : PNLSSRegressor
@@ -284,6 +295,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         "sampling": [StrOptions({"normal", "trajectory"})],
         "pnlss": [HasMethods(["fit", "get_params"]), None],
         "n_restarts": [Integers(1, None, closed="left")],
+        "extrapolation": [StrOptions({"linear", "continue"})],
     }
 
     _label = "DecoupledPNLSS"
@@ -297,6 +309,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         branch_degree=None,
         n_sampling_points=500,
         sampling="normal",
+        extrapolation="linear",
         estimate_x0=False,
         pnlss=None,
         period=None,
@@ -319,6 +332,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self.branch_degree = branch_degree
         self.n_sampling_points = n_sampling_points
         self.sampling = sampling
+        self.extrapolation = extrapolation
         self.estimate_x0 = estimate_x0
         self.pnlss = pnlss
         self.period = period
@@ -388,6 +402,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         return parameter_count(BranchTerms.layout(self.n_states, n_inputs, n_outputs,
                                                   self.rank, n_functions))
 
+    def _prediction_terms(self, model, theta, U, starts):
+        return branch_prediction_terms(model, theta, U, starts, self.extrapolation)
+
     def _n_drop(self, model):
         # Similarity transforms of the states and the scaling of each branch's
         # input and output leave the simulated output unchanged.
@@ -448,6 +465,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     def _set_terms(self, values):
         self.V_, self.W_ = values["V"], values["W"]
         self.branch_coefficients_ = values["coefficients"]
+        self.branch_input_range_ = self._model.terms.input_range
 
     def _terms_values(self):
         return {"V": self.V_, "coefficients": self.branch_coefficients_, "W": self.W_}

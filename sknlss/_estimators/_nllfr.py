@@ -22,13 +22,13 @@ Levenberg-Marquardt then minimises the simulation error over all parameters.
 
 import numpy as np
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import HasMethods
+from sklearn.utils._param_validation import HasMethods, StrOptions
 
 from .._core._model import StateSpaceModel, parameter_count
 from .._terms._bases import LegendreBasis, PolynomialBasis
 from .._terms._branches import BranchTerms
 from .._validation import Integers
-from ._nonlinear import _BaseNonlinearStateSpace
+from ._nonlinear import _BaseNonlinearStateSpace, branch_prediction_terms
 
 #: The bases that ``basis=None`` chooses from, the starts taking them in turn.
 #: Decided on the estimation records (Silverbox and Cascaded Tanks, each split
@@ -137,6 +137,13 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         turn, so that the held-out loss chooses between a power series and a
         bounded nonlinearity (with ``n_init=1``, the powers only); see
         ``basis_``.
+    extrapolation : {"linear", "continue"}, default="linear"
+        How each branch function goes on beyond the range its input took on
+        the estimation record (``branch_input_range_``): along its tangent at
+        the nearer end of that range, so that where the data did not go the
+        branch grows no faster than linearly, or as the basis combination
+        itself (a polynomial keeps its curvature). The fit is the same either
+        way; only predictions beyond that range differ.
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences; ``predict`` then
         starts from the fitted ``x0_``.
@@ -219,6 +226,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         Basis coefficients of each branch.
     basis_ : basis object
         The basis of the kept model (the chosen one with ``basis=None``).
+    branch_input_range_ : ndarray of shape (2, n_branches)
+        Lowest and highest value of each branch input on the estimation
+        record simulated by the fitted model (``-inf`` and ``inf`` with
+        ``extrapolation="continue"``).
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
     bla_ : BLAEstimator
@@ -291,12 +302,14 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         **_BaseNonlinearStateSpace._parameter_constraints,
         "n_branches": [Integers(1, None, closed="left")],
         "basis": [HasMethods(["evaluate"]), None],
+        "extrapolation": [StrOptions({"linear", "continue"})],
     }
 
     _label = "NL-LFR"
     _structure_params = ("n_states", "n_branches", "basis")
 
-    def __init__(self, n_states=2, *, n_branches=1, basis=None, estimate_x0=False,
+    def __init__(self, n_states=2, *, n_branches=1, basis=None, extrapolation="linear",
+                 estimate_x0=False,
                  period=None, cost="time", stability_penalty=0.0, weight_decay=0.0,
                  refine_linear=False, bla=None, max_iter=100, tol=1e-9,
                  validation_fraction="auto", n_iter_no_change=None, n_init=5, n_jobs=None,
@@ -304,6 +317,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.n_states = n_states
         self.n_branches = n_branches
         self.basis = basis
+        self.extrapolation = extrapolation
         self.estimate_x0 = estimate_x0
         self.period = period
         self.cost = cost
@@ -335,6 +349,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         return max(parameter_count(BranchTerms.layout(
             self.n_states, n_inputs, n_outputs, self.n_branches, basis.n_functions))
             for basis in self._bases())
+
+    def _prediction_terms(self, model, theta, U, starts):
+        return branch_prediction_terms(model, theta, U, starts, self.extrapolation)
 
     def _n_drop(self, model):
         # Similarity transforms of the states, the scaling of each branch's
@@ -376,6 +393,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.Bw_, self.Dw_ = W[:n].copy(), W[n:].copy()
         self.coefficients_ = values["coefficients"]
         self.basis_ = self._model.terms.basis
+        self.branch_input_range_ = self._model.terms.input_range
 
     def _terms_values(self):
         return {"V": np.vstack([self.Cz_.T, self.Dz_.T]), "coefficients": self.coefficients_,

@@ -130,6 +130,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     def _terms_values(self):
         """The fitted terms' parameter blocks, keyed by block name."""
 
+    def _prediction_terms(self, model, theta, U, starts):
+        """The terms the fitted model predicts with, given its parameters and
+        the estimation record: the fitted terms themselves by default."""
+        return model.terms
+
     def _n_drop(self, model):
         """Directions of the parameter space that leave the output unchanged
         (discarded from the Levenberg-Marquardt step)."""
@@ -325,7 +330,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
         # The structure the predictions simulate (the initial state is passed).
         self._model = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs,
-                                      model.terms)
+                                      self._prediction_terms(model, theta_best, U, starts))
         self._set_terms(values)
         self.n_params_ = int(model.n_params)
         self._set_search_result(result)
@@ -435,6 +440,19 @@ def _with_linear_part(model, linear):
     values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0")
                   if name in values)
     return model.pack(values)
+
+
+def branch_prediction_terms(model, theta, U, starts, extrapolation):
+    """The branch terms of ``model`` for prediction: with ``extrapolation="linear"``,
+    continued along their tangents beyond the range that each branch input
+    takes when ``theta`` simulates the estimation record ``U``; with
+    ``"continue"``, the basis combinations everywhere."""
+    if extrapolation == "continue":
+        return model.terms
+    _, X, _ = model.simulate(theta, U, starts)
+    S = np.hstack([X, U])
+    return model.terms.with_input_range(model.unpack(theta)["V"],
+                                        S[np.all(np.isfinite(S), axis=1)])
 
 
 def n_cost_values(problem):

@@ -21,7 +21,9 @@ from .._core._model import Terms
 from ._bases import basis_functions
 
 # spec = [rank, n_functions, basis code, degrees ...]
-# work = [z (r), g (r), g' (r), phi (r x n_functions), phi' (r x n_functions)]
+# work = [lower (r), upper (r), z (r), g (r), g' (r), phi (r x n_functions),
+#         phi' (r x n_functions)]; the range [lower, upper] of each branch input,
+# beyond which its function continues linearly, is set by work_init.
 _HEADER = 3
 
 
@@ -33,44 +35,57 @@ def _layout(spec, n_vars):
     return rank, n_fun, o_coef, o_w
 
 
+@njit(cache=True, inline="always")
+def _work_layout(rank, n_fun):
+    """Offsets in ``work`` of z, g, g', phi and phi'."""
+    o_z = 2 * rank
+    o_phi = o_z + 3 * rank
+    return o_z, o_z + rank, o_z + 2 * rank, o_phi, o_phi + rank * n_fun
+
+
 @njit(EVALUATE, cache=True)
 def _evaluate(theta, spec, s, n, h, work):
     n_vars = s.shape[0]
     rank, n_fun, o_coef, o_w = _layout(spec, n_vars)
     code = spec[2]
     degrees = spec[_HEADER : _HEADER + n_fun]
-    o_phi = 3 * rank
-    o_dphi = o_phi + rank * n_fun
+    o_z, o_g, o_dg, o_phi, o_dphi = _work_layout(rank, n_fun)
     for l in range(rank):
         z = 0.0
         for j in range(n_vars):
             z += theta[j * rank + l] * s[j]
-        work[l] = z
-        basis_functions(code, degrees, z, work, o_phi + l * n_fun, o_dphi + l * n_fun)
+        work[o_z + l] = z
+        # Beyond the range [lower, upper] of the branch input, the basis
+        # functions continue along their tangents at the nearer end.
+        inside = min(max(z, work[l]), work[rank + l])
+        basis_functions(code, degrees, inside, work, o_phi + l * n_fun, o_dphi + l * n_fun)
+        if inside != z:
+            for k in range(n_fun):
+                work[o_phi + l * n_fun + k] += work[o_dphi + l * n_fun + k] * (z - inside)
         g = 0.0
         dg = 0.0
         for k in range(n_fun):
             c = theta[o_coef + l * n_fun + k]
             g += c * work[o_phi + l * n_fun + k]
             dg += c * work[o_dphi + l * n_fun + k]
-        work[rank + l] = g
-        work[2 * rank + l] = dg
+        work[o_g + l] = g
+        work[o_dg + l] = dg
     for i in range(h.shape[0]):
         acc = 0.0
         for l in range(rank):
-            acc += theta[o_w + i * rank + l] * work[rank + l]
+            acc += theta[o_w + i * rank + l] * work[o_g + l]
         h[i] = acc
 
 
 @njit(STATE_JACOBIAN, cache=True)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
-    rank = spec[0]
-    o_w = _layout(spec, s.shape[0])[3]
+    rank, n_fun, _, o_w = _layout(spec, s.shape[0])
+    o_dg = _work_layout(rank, n_fun)[2]
     for i in range(dh_dx.shape[0]):
         for j in range(n):
             acc = 0.0
             for l in range(rank):
-                acc += theta[o_w + i * rank + l] * work[2 * rank + l] * theta[j * rank + l]
+                acc += theta[o_w + i * rank + l] * work[o_dg + l] * theta[j * rank + l]
             dh_dx[i, j] = acc
 
 
@@ -79,19 +94,19 @@ def _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, first_row, out, out_offs
               with_w):
     """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V, c
     (and, with ``with_w``, W) added to ``out`` from column ``out_offset``."""
-    o_phi = 3 * rank
+    _, o_g, o_dg, o_phi, _ = _work_layout(rank, n_fun)
     for r in range(out.shape[0]):
         i = first_row + r
         row = out[r]
         for l in range(rank):
             w = theta[o_w + i * rank + l]
-            slope = w * work[2 * rank + l]
+            slope = w * work[o_dg + l]
             for j in range(s.shape[0]):
                 row[out_offset + j * rank + l] += slope * s[j]
             for k in range(n_fun):
                 row[out_offset + o_coef + l * n_fun + k] += w * work[o_phi + l * n_fun + k]
             if with_w:
-                row[out_offset + o_w + i * rank + l] += work[rank + l]
+                row[out_offset + o_w + i * rank + l] += work[o_g + l]
 
 
 @njit(PARAMETER_JACOBIAN, cache=True)
@@ -115,20 +130,44 @@ class BranchTerms(Terms):
         Number of branches.
     basis : basis object
         Univariate basis of the branches (:mod:`sknlss._terms._bases`).
+    input_range : ndarray of shape (2, rank), default=None
+        Lower and upper ends of the range of each branch input inside which
+        its function is the basis combination; beyond, the function continues
+        along its tangent at the nearer end. ``None``: the basis combination
+        everywhere.
     """
 
     evaluate = staticmethod(_evaluate)
     state_jacobian = staticmethod(_state_jacobian)
     parameter_jacobian = staticmethod(_parameter_jacobian)
 
-    def __init__(self, n_states, n_inputs, n_outputs, rank, basis):
+    def __init__(self, n_states, n_inputs, n_outputs, rank, basis, input_range=None):
         degrees = basis.degrees
         n_vars, n_fun = n_states + n_inputs, len(degrees)
         self.basis = basis
+        self.dimensions = (n_states, n_inputs, n_outputs)
+        self.rank = rank
         self.blocks = self.layout(n_states, n_inputs, n_outputs, rank, n_fun)
         self.spec = np.concatenate([[rank, n_fun, basis.code], degrees]).astype(np.int64)
-        self.work_size = 3 * rank + 2 * rank * n_fun
+        self.work_size = 5 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
+        if input_range is None:
+            input_range = np.array([[-np.inf], [np.inf]]).repeat(rank, axis=1)
+        self.input_range = np.asarray(input_range, dtype=np.float64)
+
+    @property
+    def work_init(self):
+        """The work array with the input range at its head."""
+        work = np.zeros(self.work_size)
+        work[: 2 * self.rank] = self.input_range.ravel()
+        return work
+
+    def with_input_range(self, V, S):
+        """The same terms continued linearly beyond the range that the branch
+        inputs ``V^T s`` take at the points ``S = [x; u]``."""
+        Z = S @ V
+        return BranchTerms(*self.dimensions, self.rank, self.basis,
+                           np.vstack([Z.min(axis=0), Z.max(axis=0)]))
 
     @staticmethod
     def layout(n_states, n_inputs, n_outputs, rank, n_functions):
