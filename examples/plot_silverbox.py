@@ -121,10 +121,18 @@ def branch_input(X):
     return (states @ nllfr.Cz_.T + u @ nllfr.Dz_.T)[:, 0]
 
 
-z_est, z_test = branch_input(data.X_est), branch_input(test.X)
-low, high = z_est.min(), z_est.max()
+# Beyond the range of z on the estimation record, ``branch_input_range_``,
+# the model continues f along its tangent (``extrapolation="linear"``, the
+# default); ``extrapolation="continue"`` would keep the basis combination,
+# which for a cubic spring is the physical law.
+z_test = branch_input(test.X)
+low, high = nllfr.branch_input_range_[:, 0]
 grid = np.linspace(min(low, z_test.min()), max(high, z_test.max()), 400)
-w = basis.evaluate(grid)[0] @ nllfr.coefficients_[0]
+inside = np.clip(grid, low, high)
+values, slopes = basis.evaluate(inside)
+coefficients = nllfr.coefficients_[0]
+w = values @ coefficients + (slopes @ coefficients) * (grid - inside)
+w_basis = basis.evaluate(grid)[0] @ coefficients
 term = "z^{}" if isinstance(basis, PolynomialBasis) else "P_{}(tanh z)"
 print("f(z) = " + " + ".join(f"{c:.4g} {term.format(d)}"
                              for c, d in zip(nllfr.coefficients_[0], basis.degrees)))
@@ -136,7 +144,8 @@ print(f"'{record}' takes z below the estimation range in "
 
 fig, ax = plt.subplots(figsize=(8, 4), layout="constrained")
 ax.axvspan(low, high, color="0.9", label="range on the estimation record")
-ax.plot(grid, w, "C0-", label="fitted f(z)")
+ax.plot(grid, w_basis, "C1--", label='basis combination ("continue")')
+ax.plot(grid, w, "C0-", label='fitted f(z) ("linear", the model)')
 ax.set_xlabel("branch input z (normalised units)")
 ax.set_ylabel("branch output w = f(z)")
 ax.grid(True, alpha=0.3)
