@@ -309,9 +309,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     _structure_params = ("n_states", "n_branches", "basis")
 
     def __init__(self, n_states=2, *, n_branches=1, basis=None, extrapolation="linear",
-                 estimate_x0=False,
-                 period=None, cost="time", stability_penalty=0.0, weight_decay=0.0,
-                 refine_linear=False, bla=None, max_iter=100, tol=1e-9,
+                 estimate_x0=False, period=None, cost="time", stability_penalty=0.0,
+                 weight_decay=0.0, refine_linear=False, bla=None, max_iter=100, tol=1e-9,
                  validation_fraction="auto", n_iter_no_change=None, n_init=5, n_jobs=None,
                  random_state=None, n_transient=0, verbose=0):
         self.n_states = n_states
