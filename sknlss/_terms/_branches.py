@@ -21,7 +21,7 @@ from .._core._model import Terms
 from ._bases import basis_functions
 
 # spec = [rank, n_functions, basis code, degrees ...]
-# work = [lower (r), upper (r), z (r), g (r), g' (r), phi (r x n_functions),
+# work = [lower (r), upper (r), g (r), g' (r), phi (r x n_functions),
 #         phi' (r x n_functions)]; the range [lower, upper] of each branch input,
 # beyond which its function continues linearly, is set by work_init.
 _HEADER = 3
@@ -37,10 +37,9 @@ def _layout(spec, n_vars):
 
 @njit(cache=True, inline="always")
 def _work_layout(rank, n_fun):
-    """Offsets in ``work`` of z, g, g', phi and phi'."""
-    o_z = 2 * rank
-    o_phi = o_z + 3 * rank
-    return o_z, o_z + rank, o_z + 2 * rank, o_phi, o_phi + rank * n_fun
+    """Offsets in ``work`` of g, g', phi and phi'."""
+    o_phi = 4 * rank
+    return 2 * rank, 3 * rank, o_phi, o_phi + rank * n_fun
 
 
 @njit(EVALUATE, cache=True)
@@ -49,12 +48,11 @@ def _evaluate(theta, spec, s, n, h, work):
     rank, n_fun, o_coef, o_w = _layout(spec, n_vars)
     code = spec[2]
     degrees = spec[_HEADER : _HEADER + n_fun]
-    o_z, o_g, o_dg, o_phi, o_dphi = _work_layout(rank, n_fun)
+    o_g, o_dg, o_phi, o_dphi = _work_layout(rank, n_fun)
     for l in range(rank):
         z = 0.0
         for j in range(n_vars):
             z += theta[j * rank + l] * s[j]
-        work[o_z + l] = z
         # Beyond the range [lower, upper] of the branch input, the basis
         # functions continue along their tangents at the nearer end.
         inside = min(max(z, work[l]), work[rank + l])
@@ -80,7 +78,7 @@ def _evaluate(theta, spec, s, n, h, work):
 @njit(STATE_JACOBIAN, cache=True)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
     rank, n_fun, _, o_w = _layout(spec, s.shape[0])
-    o_dg = _work_layout(rank, n_fun)[2]
+    o_dg = _work_layout(rank, n_fun)[1]
     for i in range(dh_dx.shape[0]):
         for j in range(n):
             acc = 0.0
@@ -94,7 +92,7 @@ def _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, first_row, out, out_offs
               with_w):
     """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V, c
     (and, with ``with_w``, W) added to ``out`` from column ``out_offset``."""
-    _, o_g, o_dg, o_phi, _ = _work_layout(rank, n_fun)
+    o_g, o_dg, o_phi, _ = _work_layout(rank, n_fun)
     for r in range(out.shape[0]):
         i = first_row + r
         row = out[r]
@@ -149,7 +147,7 @@ class BranchTerms(Terms):
         self.rank = rank
         self.blocks = self.layout(n_states, n_inputs, n_outputs, rank, n_fun)
         self.spec = np.concatenate([[rank, n_fun, basis.code], degrees]).astype(np.int64)
-        self.work_size = 5 * rank + 2 * rank * n_fun
+        self.work_size = 4 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
         if input_range is None:
             input_range = np.array([[-np.inf], [np.inf]]).repeat(rank, axis=1)
