@@ -50,7 +50,8 @@ from sknlss import (
 from sknlss import datasets as sd
 from sknlss.benchmarks import _fit_and_score
 
-#: Number of states of each simulated system's models.
+#: Number of states of each simulated system's models (for the drive, whose
+#: loop holds four, chosen among 2-4 on fresh draws: see doc/benchmarks.rst).
 SIMULATED = {"wiener_hammerstein": 4, "duffing": 2, "bouc_wen": 3, "closed_loop_drive": 2}
 
 
