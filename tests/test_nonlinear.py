@@ -133,6 +133,34 @@ def test_validation_auto_ranks_starts_on_the_common_end(name, record):
     assert model.validation_loss_history_ is not None
 
 
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_refit_continues_the_kept_start_on_all_rows(name, record):
+    u, y = record
+    # Without weight decay the refit minimises the squared simulation error
+    # over the cost rows alone, from the parameters of the kept start.
+    kept, refitted = (FACTORIES[name](n_states=2, weight_decay=0.0, refit=refit)
+                      .set_params(random_state=0).fit(u, y) for refit in (False, True))
+    assert not kept.fell_back_to_linear_
+    assert kept.refit_n_iter_ == 0
+    assert refitted.refit_n_iter_ > 0
+    # The search is the same; only what follows it differs.
+    np.testing.assert_array_equal(refitted.start_losses_, kept.start_losses_)
+    assert refitted.fit_transient_ == kept.fit_transient_
+    rows = slice(kept.fit_transient_, None)
+    before = rms_error(y[rows], kept.predict(u)[rows])
+    after = rms_error(y[rows], refitted.predict(u)[rows])
+    assert after < before
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_refit_needs_a_held_out_end(name, record):
+    u, y = record
+    models = [FACTORIES[name](n_states=2, validation_fraction=0.0, refit=refit)
+              .set_params(random_state=0).fit(u, y) for refit in (False, True)]
+    assert [model.refit_n_iter_ for model in models] == [0, 0]
+    np.testing.assert_array_equal(models[0].predict(u), models[1].predict(u))
+
 def test_fallback_to_the_linear_model_is_reported(record):
     u, y = record
     # Without iterations the start stays at its starting point, the linear

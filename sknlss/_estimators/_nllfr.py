@@ -187,6 +187,11 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         and 0.325 in turn and ranks them on the end they all held out (no
         hold-out with ``period``, periodic records being fitted in whole
         periods, nor for sequences shorter than 100 samples).
+    refit : bool, default=False
+        After the search, refine the kept start on all the rows, the held-out
+        ends included, for up to ``max_iter`` iterations (no effect without
+        hold-out); a refinement that fails or leaves the boundedness guard is
+        dropped. Off by default, as for the polynomial models (see the user guide).
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (no effect without hold-out).
@@ -258,6 +263,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         nonlinear terms are zero).
     linear_loss_ : float
         Mean squared simulation error of the linear start on that end.
+    refit_n_iter_ : int
+        Iterations of the refit on all the rows that were kept (0 without one).
     fit_transient_ : int
         Samples per sequence left out of the cost (see ``n_transient``).
     n_features_in_ : int
@@ -311,8 +318,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     def __init__(self, n_states=2, *, n_branches=1, basis=None, extrapolation="linear",
                  estimate_x0=False, period=None, cost="time", stability_penalty=0.0,
                  weight_decay=0.0, refine_linear=False, bla=None, max_iter=100, tol=1e-9,
-                 validation_fraction="auto", n_iter_no_change=None, n_init=5, n_jobs=None,
-                 random_state=None, n_transient=0, verbose=0):
+                 validation_fraction="auto", refit=False, n_iter_no_change=None, n_init=5,
+                 n_jobs=None, random_state=None, n_transient=0, verbose=0):
         self.n_states = n_states
         self.n_branches = n_branches
         self.basis = basis
@@ -327,6 +334,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.max_iter = max_iter
         self.tol = tol
         self.validation_fraction = validation_fraction
+        self.refit = refit
         self.n_iter_no_change = n_iter_no_change
         self.n_init = n_init
         self.n_jobs = n_jobs

@@ -202,6 +202,14 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         0.325 in turn and ranks them on the end they all held out (no
         hold-out with ``period``, periodic records being fitted in whole
         periods, nor for sequences shorter than 100 samples).
+    refit : bool, default=True
+        After the search, refine the kept start on all the rows, the held-out
+        ends included, for up to ``max_iter`` iterations (no effect without
+        hold-out). The hold-out still chooses the start and the iterate it
+        is refined from; the refinement then uses the information at the
+        end of the record. A refinement that fails or leaves the
+        boundedness guard is dropped. Decided on the estimation records
+        and on simulated systems (see the user guide).
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
@@ -278,6 +286,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         nonlinear terms are zero).
     linear_loss_ : float
         Mean squared simulation error of the linear start on that end.
+    refit_n_iter_ : int
+        Iterations of the refit on all the rows that were kept (0 without one).
     fit_transient_ : int
         Samples per sequence left out of the cost (see ``n_transient``).
     bla_ : BLAEstimator
@@ -307,7 +317,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     initialisation per start); the initial state starts at the estimated
     first state. Levenberg-Marquardt then minimises the simulation error on
     the fitted rows with the analytic Jacobian; with ``validation_fraction``,
-    the iterate and the start with the lowest validation error are kept.
+    the iterate and the start with the lowest validation error are kept;
+    with ``refit``, that iterate is then refined on all the rows.
     Diagonal rescalings of the states leave the output unchanged, so the
     ``n_states`` smallest singular directions of the Jacobian are dropped
     (unless ``weight_decay`` fixes the scale).
@@ -360,8 +371,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     def __init__(self, n_states=2, *, alpha=0.3, n_neurons=2, activation="sigmoid",
                  estimate_x0=False, period=None, cost="time", stability_penalty=0.0,
                  weight_decay=10.0, refine_linear=True, bla=None, max_iter=100, tol=1e-9,
-                 validation_fraction="auto", n_iter_no_change=None, n_init=5, n_jobs=None,
-                 random_state=None, n_transient=0, verbose=0):
+                 validation_fraction="auto", refit=True, n_iter_no_change=None, n_init=5,
+                 n_jobs=None, random_state=None, n_transient=0, verbose=0):
         self.n_states = n_states
         self.alpha = alpha
         self.n_neurons = n_neurons
@@ -376,6 +387,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         self.max_iter = max_iter
         self.tol = tol
         self.validation_fraction = validation_fraction
+        self.refit = refit
         self.n_iter_no_change = n_iter_no_change
         self.n_init = n_init
         self.n_jobs = n_jobs

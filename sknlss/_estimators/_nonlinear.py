@@ -13,7 +13,9 @@ Every nonlinear estimator identifies ``x(t+1) = A x + B u + h_x(x, u)``,
 4. one or more starting points of the terms (the estimator's own
    initialisation), each refined by Levenberg-Marquardt on the shared
    :class:`~sknlss._core._problem.SimulationErrorProblem`; the start with the
-   lowest held-out loss is kept.
+   lowest held-out loss is kept;
+5. optionally (``refit``), the kept start refined further on all the rows,
+   the held-out ends included.
 
 A subclass provides its terms (``_make_terms``, or several candidate
 structures that the starts take in turn through ``_candidate_terms``), its
@@ -86,6 +88,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         "max_iter": [Integers(0, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "validation_fraction": [Interval(Real, 0, 1, closed="left"), StrOptions({"auto"})],
+        "refit": ["boolean"],
         "n_iter_no_change": [Integers(1, None, closed="left"), None],
         "n_init": [Integers(1, None, closed="left")],
         "n_jobs": [ANY_INTEGER, None],
@@ -258,7 +261,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     + (n if self.estimate_x0 else 0))
         # The largest Jacobian: the smallest hold-out and the shortest transient.
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
-                                 validation_fraction=min(shares),
+                                 validation_fraction=min(self._row_shares(shares)),
                                  steady_state_period=self.period).fit_rows.sum())
         # The stability penalty has a row per fitted sample at most.
         n_rows = (n_samples * n_y + (n_samples if self.stability_penalty else 0)
@@ -300,7 +303,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self.fit_transient_ = self._cost_transient(A, starts)
         rows = {share: fit_rows(U, Y, starts, n_transient=self.fit_transient_,
                                 validation_fraction=share, steady_state_period=self.period)
-                for share in sorted(set(shares))}
+                for share in self._row_shares(shares)}
         problem_sets = [{share: SimulationErrorProblem(
             StateSpaceModel(self.n_states, U.shape[1], Y.shape[1], terms,
                             estimate_x0=self.estimate_x0),
@@ -315,6 +318,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values = {name: np.zeros(shape) for name, shape in model.blocks}
         values.update(A=A, B=B, C=C, D=D, x0=x0)
         theta = model.pack(values)
+        self.refit_n_iter_ = 0
         if self._underdetermined(problem):
             theta_best, result = self._fit_linear_part(problem, theta)
             self.start_losses_, self.fell_back_to_linear_ = np.zeros(0), True
@@ -400,7 +404,33 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             # and its guard lie in between.
             warnings.warn(message, category, stacklevel=5)
         self._record_start(contexts[c_best], j_best, seed_best)
+        if self._refits(shares):
+            theta_best = self._refit(problem_sets[c_best][0.0], theta_best)
         return contexts[c_best]["model"], theta_best, result
+
+    def _refits(self, shares):
+        """Whether the kept start is refined on all the rows after the search."""
+        return self.refit and self.max_iter > 0 and max(shares) > 0
+
+    def _row_shares(self, shares):
+        """The held-out shares that the fit builds rows for, increasing."""
+        return sorted(set(shares) | ({0.0} if self._refits(shares) else set()))
+
+    def _refit(self, problem, theta):
+        """``theta`` refined on all the rows of ``problem`` (the held-out ends
+        included), sets ``refit_n_iter_``. The start was chosen on the held-out
+        ends; the data there then still inform the parameters. A refit that
+        fails or leaves the boundedness guard is dropped."""
+        try:
+            refitted, result = fit_from(problem, [theta],
+                                        label=f"{self._label} (refit on all rows)",
+                                        **self._lm_options(problem.model))
+        except START_ERRORS:
+            return theta
+        if not stays_bounded(problem, refitted):
+            return theta
+        self.refit_n_iter_ = result.n_iter
+        return refitted
 
     # ------------------------------------------------------------ simulation
     def _fitted_model(self):
