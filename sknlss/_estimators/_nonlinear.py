@@ -30,6 +30,7 @@ from numbers import Real
 
 import numpy as np
 from joblib import effective_n_jobs
+from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 
@@ -422,9 +423,14 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         ends; the data there then still inform the parameters. A refit that
         fails or leaves the boundedness guard is dropped."""
         try:
-            refitted, result = fit_from(problem, [theta],
-                                        label=f"{self._label} (refit on all rows)",
-                                        **self._lm_options(problem.model))
+            with warnings.catch_warnings():
+                # The model was chosen, and its convergence judged, on the
+                # held-out ends; a cost on all rows that still falls slowly at
+                # max_iter is expected and shows in refit_n_iter_.
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                refitted, result = fit_from(problem, [theta],
+                                            label=f"{self._label} (refit on all rows)",
+                                            **self._lm_options(problem.model))
         except START_ERRORS:
             return theta
         if not stays_bounded(problem, refitted):
