@@ -133,7 +133,6 @@ def test_validation_auto_ranks_starts_on_the_common_end(name, record):
     assert model.validation_loss_history_ is not None
 
 
-
 @pytest.mark.parametrize("name", FACTORIES)
 def test_refit_continues_the_kept_start_on_all_rows(name, record):
     u, y = record
@@ -164,6 +163,7 @@ def test_refit_needs_a_held_out_end(name, record):
               .set_params(random_state=0).fit(u, y) for refit in (False, True)]
     assert [model.refit_n_iter_ for model in models] == [0, 0]
     np.testing.assert_array_equal(models[0].predict(u), models[1].predict(u))
+
 
 def test_fallback_to_the_linear_model_is_reported(record):
     u, y = record
