@@ -156,9 +156,9 @@ def _inference_and_learning(problem, theta, V, basis, seed):
     few fixed-point iterations, and returns the output error that ``f(z)``
     leaves. The output directions ``W`` and the input directions ``V``
     minimise it (``scipy.optimize.least_squares``) from the given ``V`` and
-    random ``W`` drawn from ``seed``. A basis without a degree-1 function gets a linear
-    term during the search, moved into the linear part at the end (``fold``:
-    ``[A B; C D] += W diag(fold) V^T``).
+    random ``W`` drawn from ``seed``. A basis without a degree-1 function gets
+    a linear term during the search, moved into the linear part at the end
+    (``fold``: ``[A B; C D] += W diag(fold) V^T``).
 
     The inference treats the first sequence's first ``_INFERENCE_SAMPLES``
     samples as one period: exact for a periodic record in steady state, an
@@ -170,6 +170,7 @@ def _inference_and_learning(problem, theta, V, basis, seed):
     V, W : ndarray of shape (n_states + n_inputs, r), (n_states + n_outputs, r)
     coefficients : ndarray of shape (r, n_basis_functions)
     fold : ndarray of shape (r,)
+        All None when the search ends where the least squares fail.
     """
     model = problem.model
     n, r = model.n_states, V.shape[1]
@@ -186,6 +187,7 @@ def _inference_and_learning(problem, theta, V, basis, seed):
     starts = np.array([0, len(error)])
     V, _ = _branch_inputs(V, S, rows)
     linear = 1 not in basis.degrees
+    W_size = (n + model.n_outputs) * r
 
     def features(z):
         phi = basis.evaluate(z)[0]
@@ -208,16 +210,21 @@ def _inference_and_learning(problem, theta, V, basis, seed):
         return residual, W, Vp, np.array(coefficients)
 
     def residual(p):
-        e = evaluate(p)[0]
-        # A direction whose fixed point runs away is a bad direction.
+        # Directions whose fixed point runs away are bad directions.
+        try:
+            e = evaluate(p)[0]
+        except np.linalg.LinAlgError:
+            return np.full(rows.size * model.n_outputs, _INFERENCE_PENALTY)
         return e if np.all(np.isfinite(e)) else np.full(e.shape, _INFERENCE_PENALTY)
 
-    W_size = (n + model.n_outputs) * r
     p0 = np.concatenate([check_random_state(seed).standard_normal(W_size), V.ravel()])
     with np.errstate(all="ignore"):
         found = least_squares(residual, p0, x_scale="jac", ftol=_INFERENCE_TOL,
                               max_nfev=_INFERENCE_STEPS)
-        _, W, V, coefficients = evaluate(found.x)
+        try:
+            _, W, V, coefficients = evaluate(found.x)
+        except np.linalg.LinAlgError:
+            return None, None, None, None
     if linear:
         return V, W, coefficients[:, 1:], coefficients[:, 0]
     return V, W, coefficients, np.zeros(r)
@@ -293,8 +300,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         map's Jacobian at every fitted sample, relative to the mean squared
         residual.
     weight_decay : float, default=0.0
-        Weight of a penalty on the size of the branches (Bw, Dw and the coefficients), added to the sum of squared
-        residuals (normalised units): ``sum_k (c_k theta_k)^2``, with ``c_k``
+        Weight of a penalty on the size of the branches (Bw, Dw and the
+        coefficients), added to the sum of squared residuals (normalised
+        units): ``sum_k (c_k theta_k)^2``, with ``c_k``
         the RMS of the direct effect of parameter k on the model's equations
         along the trajectory of the starting point, so that it acts on each
         term's contribution whatever the units. Like a prior, it does not grow
@@ -532,6 +540,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
             return candidates
         V, W, c, fold = _inference_and_learning(problem, context["theta"], directions,
                                                 model.terms.basis, seed)
+        if V is None:
+            return candidates
         n = model.n_states
         linear = np.block([[values["A"], values["B"]], [values["C"], values["D"]]])
         linear = linear + (W * fold) @ V.T
