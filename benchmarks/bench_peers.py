@@ -84,10 +84,9 @@ def _fit_nllfr(X, y, sequence_id, settings, seed):
     return model, time.perf_counter() - start
 
 
-def _fit_freq_statespace(data):
+def _fit_freq_statespace(data, U, Y):
     import freq_statespace as fss
 
-    U, Y = _steady_state_periods(data.X_est.ravel(), data.y_est)
     start = time.perf_counter()
     io_data = fss.create_data_object(U, Y, EXCITED_LINES, 1.0 / data.sampling_time)
     bla = fss.lin.optimize(fss.lin.subspace_id(io_data, 2), io_data)
@@ -177,7 +176,7 @@ def _table(data):
             # estimate weights its frequency-domain cost (one period per
             # realization).
             warnings.simplefilter("ignore")
-            peer, peer_time = _fit_freq_statespace(data)
+            peer, peer_time = _fit_freq_statespace(data, U, Y)
     except ImportError:
         yield ("freq-statespace is not installed (pip install freq-statespace): no "
                "side-by-side row.")

@@ -31,6 +31,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, StrOptions
 
 from .._core._model import StateSpaceModel, parameter_count
+from .._linear._realization import simulate_linear, ss_frf
 from .._terms._bases import LegendreBasis, PolynomialBasis
 from .._terms._branches import BranchTerms
 from .._validation import Integers
@@ -125,9 +126,7 @@ def _least_squares_terms(problem, theta, V):
 
 def _response(A, B, C, D, U, starts):
     """Output of the linear system ``(A, B, C, D)`` driven by ``U`` from rest."""
-    model = StateSpaceModel(A.shape[0], B.shape[1], C.shape[0])
-    theta = model.pack({"A": A, "B": B, "C": C, "D": D})
-    return model.simulate(theta, U, starts, np.zeros(A.shape[0]))[0]
+    return simulate_linear(A, B, C, D, U, starts, np.zeros((len(starts) - 1, A.shape[0])))[0]
 
 
 def _inferred_branch_outputs(A, C, Bw, Dw, R):
@@ -135,10 +134,8 @@ def _inferred_branch_outputs(A, C, Bw, Dw, R):
     output error best, per DFT line, with a Tikhonov penalty on their size
     (weighted by the size of the output directions, so that it does not
     depend on their scale)."""
-    n, r = Bw.shape
-    lines = np.exp(2j * np.pi * np.arange(R.shape[0]) / (2 * (R.shape[0] - 1)))
-    resolvent = np.linalg.solve(lines[:, None, None] * np.eye(n) - A, Bw)
-    G = C @ resolvent + Dw
+    r = Bw.shape[1]
+    G = ss_frf(A, Bw, C, Dw, np.arange(R.shape[0]) / (2 * (R.shape[0] - 1)))
     GH = np.conj(np.transpose(G, (0, 2, 1)))
     directions = np.vstack([Bw, Dw])
     penalty = _INFERENCE_RIDGE * (directions.T @ directions) + _INFERENCE_EPS * np.eye(r)
