@@ -119,12 +119,26 @@ def _cell(errors, name):
     return f"{np.median(values):.4f}" if np.all(np.isfinite(values)) else "diverged"
 
 
-def _versions():
+def _versions(*packages):
+    """The line naming the peer packages' versions, the first one the peer itself."""
     try:
-        peers = ", ".join(f"{name} {version(name)}" for name in ("freq-statespace", "jax"))
+        peers = ", ".join(f"{name} {version(name)}" for name in packages)
     except PackageNotFoundError:
-        peers = "freq-statespace not installed"
+        peers = f"{packages[0]} not installed"
     return f"Peer versions: {peers}\n"
+
+
+def _publish(lines, output, peers):
+    """Print the table's lines as they come; with ``output``, also write them to
+    that file, headed by the machine and the versions of the ``peers``."""
+    printed = []
+    for line in lines:
+        print(line, flush=True)
+        printed.append(line)
+    if output is not None:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        output.write_text(_machine() + _versions(*peers) + "\n" + "\n".join(printed) + "\n",
+                          encoding="utf-8")
 
 
 def _table(data):
@@ -192,14 +206,8 @@ def main(argv=None):
     parser.add_argument("--output", type=Path, metavar="FILE",
                         help="also write the printed table to FILE")
     args = parser.parse_args(argv)
-    lines = []
-    for line in _table(fetch_silverbox(download_if_missing=False)):
-        print(line, flush=True)
-        lines.append(line)
-    if args.output is not None:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-        args.output.write_text(_machine() + _versions() + "\n" + "\n".join(lines) + "\n",
-                               encoding="utf-8")
+    _publish(_table(fetch_silverbox(download_if_missing=False)), args.output,
+             ("freq-statespace", "jax"))
 
 
 if __name__ == "__main__":
