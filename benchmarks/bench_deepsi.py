@@ -103,7 +103,8 @@ def _fit_subnet(data, n_states, records, scale, n_iterations, seed):
 
 
 def _sknlss_rows(runs, names):
-    for label in _models(1, tanks=True):
+    # In the accuracy benchmark's order of its models (the tanks have them all).
+    for label in _models(n_states=1, tanks=True):
         rows = [r for r in runs if r["model"] == label]
         if not rows:
             continue

@@ -190,6 +190,9 @@ def _inference_and_learning(problem, theta, V, basis, seed):
         phi = basis.evaluate(z)[0]
         return np.hstack([z[:, None], phi]) if linear else phi
 
+    def branch_outputs(z, coefficients):
+        return np.column_stack([features(z[:, l]) @ coefficients[l] for l in range(r)])
+
     def evaluate(p):
         W = p[: W_size].reshape(n + model.n_outputs, r)
         Vp = p[W_size:].reshape(V.shape)
@@ -200,9 +203,9 @@ def _inference_and_learning(problem, theta, V, basis, seed):
         coefficients = [np.linalg.lstsq(features(z[rows, l]), w[rows, l], rcond=None)[0]
                         for l in range(r)]
         for _ in range(_FIXED_POINT_ITERATIONS):
-            w = np.column_stack([features(z[:, l]) @ coefficients[l] for l in range(r)])
+            w = branch_outputs(z, coefficients)
             z = z_linear + _response(A, Bw, Cz, np.zeros((r, r)), w, starts)
-        w = np.column_stack([features(z[:, l]) @ coefficients[l] for l in range(r)])
+        w = branch_outputs(z, coefficients)
         residual = (error - _response(A, Bw, C, Dw, w, starts))[rows].ravel()
         return residual, W, Vp, np.array(coefficients)
 
@@ -456,10 +459,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
 
     def __init__(self, n_states=2, *, n_branches=1, basis=None, extrapolation="linear",
                  init="trajectory", estimate_x0=False, period=None, cost="time",
-                 stability_penalty=0.0,
-                 weight_decay=0.0, refine_linear=False, bla=None, max_iter=100, tol=1e-9,
-                 validation_fraction="auto", refit=False, n_iter_no_change=None, n_init=5,
-                 n_jobs=None, random_state=None, n_transient=0, verbose=0):
+                 stability_penalty=0.0, weight_decay=0.0, refine_linear=False, bla=None,
+                 max_iter=100, tol=1e-9, validation_fraction="auto", refit=False,
+                 n_iter_no_change=None, n_init=5, n_jobs=None, random_state=None,
+                 n_transient=0, verbose=0):
         self.n_states = n_states
         self.n_branches = n_branches
         self.basis = basis
