@@ -130,7 +130,9 @@ def nrmse(y_true, y_pred, *, n_transient=0, sequence_id=None,
     -------
     nrmse : float or ndarray of shape (n_outputs,)
         Dimensionless; 1 is the error of predicting the mean; infinite for an
-        output whose simulation diverged.
+        output whose simulation diverged. An output that is constant over the
+        scored samples has no scale: 0 if it is simulated exactly, else
+        infinite.
 
     Examples
     --------
@@ -141,7 +143,9 @@ def nrmse(y_true, y_pred, *, n_transient=0, sequence_id=None,
     y_true, y_pred, diverged = _kept_pairs(y_true, y_pred, n_transient, sequence_id)
     rms = _rms_errors(y_true, y_pred, diverged)
     std = _rms(y_true - y_true.mean(axis=0))
-    return _aggregate(rms / np.where(std > 0, std, 1.0), multioutput)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(std > 0, rms / std, np.where(rms > 0, np.inf, 0.0))
+    return _aggregate(ratio, multioutput)
 
 
 @validate_params(_METRIC_CONSTRAINTS, prefer_skip_nested_validation=True)
@@ -168,7 +172,8 @@ def fit_percent(y_true, y_pred, *, n_transient=0, sequence_id=None,
     Returns
     -------
     fit : float or ndarray of shape (n_outputs,)
-        Fit in percent; ``-inf`` for an output whose simulation diverged.
+        Fit in percent; ``-inf`` for an output whose simulation diverged, or
+        that is constant over the scored samples and not simulated exactly.
 
     Examples
     --------

@@ -242,6 +242,11 @@ def test_bad_input():
         BLAEstimator(n_states=8).fit(X[:12], y[:12])
     with pytest.raises(ValueError, match="no sample|too short"):
         BLAEstimator(n_transient=10).fit(X[:12], y[:12])
+    # A sequence shorter than n_transient is named by its rows.
+    short = np.repeat([0, 1, 2], [100, 30, 100])
+    with pytest.raises(ValueError, match=r"sequence of rows 100 to 129 \(sequence_id\) has "
+                                         r"30 sample\(s\), 0 after n_transient=50"):
+        BLAEstimator(n_transient=50).fit(X[:230], y[:230], sequence_id=short)
 
 
 def test_mimo_single_record_lpm():

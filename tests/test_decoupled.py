@@ -7,7 +7,7 @@ import pytest
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
-from sknlss import DecoupledPNLSS, PNLSSRegressor, PolynomialBasis
+from sknlss import BLAEstimator, DecoupledPNLSS, PNLSSRegressor, PolynomialBasis
 from sknlss._core._model import StateSpaceModel
 from sknlss._estimators._decoupled import _stack_polynomials
 from sknlss._terms._branches import BranchTerms
@@ -162,6 +162,15 @@ def test_pnlss_hyperparameters_are_nested():
     assert "pnlss__degree" in model.get_params()
     model.set_params(pnlss__degree=2, rank=3)
     assert clone(model).pnlss.degree == 2
+
+
+def test_errors_name_the_decoupled_model(wiener_data):
+    u, y = wiener_data
+    with pytest.raises(ValueError, match="'pnlss' parameter of DecoupledPNLSS must be an "
+                                         "instance of .*PNLSSRegressor"):
+        DecoupledPNLSS(pnlss=BLAEstimator()).fit(u, y)
+    with pytest.raises(ValueError, match="This DecoupledPNLSS estimator requires y"):
+        DecoupledPNLSS().fit(u, None)
 
 
 def test_random_state_makes_the_fit_reproducible(wiener_data):

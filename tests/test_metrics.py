@@ -35,6 +35,15 @@ def test_nrmse_and_fit_hand_values():
     assert fit_percent(y_true, y_true) == pytest.approx(100.0)
     # Predicting the mean gives fit 0.
     assert fit_percent(y_true, np.ones(4)) == pytest.approx(0.0)
+    # A constant output has no scale: exact, or infinitely far, in any units.
+    for scale in (1.0, 1e3):
+        assert nrmse(scale * np.array([2.0, 2.0, 2.0]), scale * np.array([2.0, 2.0, 3.0])) == np.inf
+        assert fit_percent(scale * np.array([2.0, 2.0]), scale * np.array([3.0, 3.0])) == -np.inf
+    assert nrmse([2.0, 2.0], [2.0, 2.0]) == 0.0
+    assert fit_percent([2.0, 2.0], [2.0, 2.0]) == 100.0
+    np.testing.assert_array_equal(
+        nrmse([[2.0, 0.0], [2.0, 2.0]], [[2.0, 1.0], [2.0, 1.0]], multioutput="raw_values"),
+        [0.0, 1.0])
 
 
 def test_metric_errors():

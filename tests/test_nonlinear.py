@@ -180,6 +180,23 @@ def test_fallback_to_the_linear_model_is_reported(record):
     assert not fitted.fell_back_to_linear_
 
 
+@pytest.mark.parametrize("name", FACTORIES)
+def test_a_refit_on_a_record_too_short_for_the_terms_leaves_nothing_stale(name, record):
+    # The second fit keeps the linear model without any start; no attribute
+    # of the first fit may survive it, and the selection attributes describe
+    # the second fit.
+    u, y = record
+    model = FACTORIES[name](n_init=2).fit(u, y)
+    model.fit(u[:12], y[:12])
+    fresh = FACTORIES[name](n_init=2).fit(u[:12], y[:12])
+    assert model.fell_back_to_linear_ and fresh.fell_back_to_linear_
+    assert sorted(k for k in vars(model) if k.endswith("_")) == sorted(
+        k for k in vars(fresh) if k.endswith("_"))
+    np.testing.assert_array_equal(model.start_losses_, [np.inf, np.inf])
+    assert np.isfinite(model.linear_loss_) and model.linear_loss_ == fresh.linear_loss_
+    np.testing.assert_array_equal(model.predict(u), fresh.predict(u))
+
+
 def _cubic_problem(amplitude):
     """x(t+1) = x/2 + u + x^3/20 with a sine input, and its parameters: the
     simulation escapes to infinity once |x| is large enough."""
@@ -273,5 +290,8 @@ def test_estimate_initial_state_bad_input(fitted_models, record):
         model.estimate_initial_state(u, np.where(np.arange(20) == 3, np.nan, y))
     with pytest.raises(ValueError, match="'max_iter' parameter .* must be an int in the range"):
         model.estimate_initial_state(u, y, max_iter=-1)
-    with pytest.raises(ValueError, match="x0 must be finite, of shape"):
+    with pytest.raises(ValueError, match=r"x0 must be of shape \(2,\) or \(1, 2\) for 1 "
+                                         r"sequence\(s\); got shape \(3,\)"):
         model.estimate_initial_state(u, y, x0=np.zeros(3))
+    with pytest.raises(ValueError, match="x0 must be finite"):
+        model.estimate_initial_state(u, y, x0=[np.nan, 0.0])

@@ -43,6 +43,28 @@ def test_zero_rows_leave_the_step_unchanged():
             _damped_step(*_scaled_step_factors(J, r), damping), rtol=1e-12, atol=1e-14)
 
 
+def test_the_step_survives_a_failed_divide_and_conquer_svd(monkeypatch):
+    # LAPACK's gesdd can fail to converge on a nearly singular triangular
+    # factor (seen with a BLA of 19 states on a MIMO record); the step then
+    # comes from the QR-iteration driver, with the same factors.
+    from scipy.linalg import LinAlgError, svd
+
+    from sknlss._core import _optimize
+
+    rng = np.random.default_rng(0)
+    J, r = rng.standard_normal((40, 6)), rng.standard_normal(40)
+    expected = _damped_step(*_scaled_step_factors(J, r), 0.1)
+
+    def failing_gesdd(a, **kwargs):
+        if kwargs.get("lapack_driver") == "gesdd":
+            raise LinAlgError("SVD did not converge")
+        return svd(a, **kwargs)
+
+    monkeypatch.setattr(_optimize, "svd", failing_gesdd)
+    np.testing.assert_allclose(_damped_step(*_scaled_step_factors(J, r), 0.1), expected,
+                               rtol=1e-10, atol=1e-12)
+
+
 def test_a_flat_zero_problem_stops_without_a_step():
     result = levenberg_marquardt(
         lambda theta, jacobian: (np.zeros(5), np.zeros((5, 2)) if jacobian else None),

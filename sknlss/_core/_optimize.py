@@ -13,7 +13,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import qr, svd
+from scipy.linalg import LinAlgError, qr, svd
 from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
@@ -100,8 +100,15 @@ def _scaled_step_factors(J, r):
     # mode="raw" returns the economic triangular factor; "r" would pad it with
     # zero rows to the full height of J.
     R = qr(augmented, mode="raw", overwrite_a=True, check_finite=False)[1]
-    Ur, s, Vt = svd(R[:, :p], full_matrices=False, check_finite=False,
-                    lapack_driver="gesdd")
+    try:
+        Ur, s, Vt = svd(R[:, :p], full_matrices=False, check_finite=False,
+                        lapack_driver="gesdd")
+    except LinAlgError:
+        # The divide-and-conquer driver can fail to converge on a nearly
+        # singular factor (condition numbers near 1e19); the QR-iteration
+        # driver is slower but converges there.
+        Ur, s, Vt = svd(R[:, :p], full_matrices=False, check_finite=False,
+                        lapack_driver="gesvd")
     return s, Vt, col_scale, Ur.T @ R[:, p]
 
 

@@ -79,20 +79,28 @@ def _normalised(values, offset, scale):
 _PRIVATE_FITTED = ("_y_was_1d", "_model")
 
 
+def _clear_fitted(estimator):
+    """Remove the fitted attributes of ``estimator``."""
+    for name in [name for name in vars(estimator)
+                 if (name.endswith("_") and not name.startswith("__"))
+                 or name in _PRIVATE_FITTED]:
+        delattr(estimator, name)
+
+
 def _unfitted_on_error(fit):
-    """Decorate ``fit`` so that a fit that does not complete, whatever stops it
-    (an error, ``KeyboardInterrupt``), leaves the estimator unfitted rather than
-    with some of its fitted attributes set."""
+    """Decorate ``fit`` so that it starts from an unfitted estimator (no
+    attribute of an earlier fit survives one that does not set it again), and
+    so that a fit that does not complete, whatever stops it (an error,
+    ``KeyboardInterrupt``), leaves the estimator unfitted rather than with some
+    of its fitted attributes set."""
 
     @functools.wraps(fit)
     def guarded_fit(self, *args, **kwargs):
+        _clear_fitted(self)
         try:
             return fit(self, *args, **kwargs)
         except BaseException:
-            for name in [name for name in vars(self)
-                         if (name.endswith("_") and not name.startswith("__"))
-                         or name in _PRIVATE_FITTED]:
-                delattr(self, name)
+            _clear_fitted(self)
             raise
 
     return guarded_fit
@@ -165,6 +173,10 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         self : object
             The fitted estimator.
         """
+        return self._fit(X, y, sequence_id)
+
+    def _fit(self, X, y, sequence_id):
+        """The work of ``fit``, for subclasses whose ``fit`` sets attributes first."""
         self._validate_params()
         U, Y, starts = self._validate_training_data(X, y, sequence_id)
         self._fit_normalized(U, Y, starts)
@@ -202,14 +214,14 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             x0 = self.x0_
         with naming("x0"):
             x0 = np.asarray(x0, dtype=np.float64)
-        if x0.ndim == 1:
-            x0 = np.broadcast_to(x0, (n_sequences, x0.shape[0]))
-        if x0.shape != (n_sequences, n_states) or not np.all(np.isfinite(x0)):
+        if x0.shape not in ((n_states,), (n_sequences, n_states)):
             raise ValueError(
-                f"x0 must be finite, of shape ({n_states},) or ({n_sequences}, "
-                f"{n_states}) for {n_sequences} sequence(s); got shape {x0.shape}."
+                f"x0 must be of shape ({n_states},) or ({n_sequences}, {n_states}) for "
+                f"{n_sequences} sequence(s); got shape {x0.shape}."
             )
-        return np.ascontiguousarray(x0)
+        if not np.all(np.isfinite(x0)):
+            raise ValueError("x0 must be finite; it holds NaN or infinity.")
+        return np.ascontiguousarray(np.broadcast_to(x0, (n_sequences, n_states)))
 
     def simulate(self, X, *, sequence_id=None, x0=None, return_states=False):
         """Simulate the fitted model in free run.

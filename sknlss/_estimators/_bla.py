@@ -98,11 +98,15 @@ def _nonparametric(U, Y, starts, params):
             raise ValueError('method="robust" needs the `period` of the excitation.')
         return robust_frf(U, Y, starts, period, n_transient=n_transient,
                           max_frequency=params["max_frequency"])
-    shortest = int(np.diff(starts).min()) - n_transient
-    if shortest < 2:
+    lengths = np.diff(starts)
+    if lengths.min() - n_transient < 2:
+        k = int(np.argmin(lengths))
+        which = ("The record (X, y)" if lengths.size == 1 else
+                 f"The sequence of rows {starts[k]} to {starts[k + 1] - 1} (sequence_id)")
         raise ValueError(
-            f"A record of {shortest} sample(s) after n_transient={n_transient} "
-            "is too short for the Local Polynomial Method."
+            f"{which} has {lengths[k]} sample(s), {max(lengths[k] - n_transient, 0)} "
+            f"after n_transient={n_transient}: the Local Polynomial Method needs at "
+            "least 2 per sequence. Lower n_transient or leave that sequence out."
         )
     return lpm_frf(U, Y, starts, order=params["lpm_order"],
                    bandwidth=params["lpm_bandwidth"], n_transient=n_transient,

@@ -12,7 +12,7 @@ import numpy as np
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import HasMethods, StrOptions
+from sklearn.utils._param_validation import StrOptions
 
 from .._core._model import parameter_count
 from .._terms._bases import PolynomialBasis
@@ -126,9 +126,11 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``n_states``, ``estimate_x0``, ``period``, ``cost``,
         ``validation_fraction``, ``n_transient``, ``n_jobs`` and
         ``random_state`` from this estimator, and its normalisation of the
-        signals (``center``) is used by the decoupled model too. Its own
-        hyperparameters are tunable as ``pnlss__degree`` and so on. ``None``
-        uses ``PNLSSRegressor()``.
+        signals (``center``) is used by the decoupled model too. ``None``
+        uses ``PNLSSRegressor()``. The template's own hyperparameters are
+        tunable as ``pnlss__degree`` and so on once a template is given
+        (``pnlss=PNLSSRegressor()``): as with scikit-learn's meta-estimators,
+        ``None`` has no parameters to set.
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -221,7 +223,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Degree of the branches used.
     decoupling_error_ : float
         Relative error of the decoupled Jacobian tensor in the sampling points
-        (of the kept start).
+        (of the kept start); not set when the record is too short for the
+        branches and the linear model is kept without any start.
     n_params_ : int
         Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
         ``+ (n + n_u) r + (n + n_y) r`` (V, W) ``+ (d - 1) r`` (branches)
@@ -301,7 +304,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         "branch_degree": [Integers(2, None, closed="left"), None],
         "n_sampling_points": [Integers(1, None, closed="left")],
         "sampling": [StrOptions({"normal", "trajectory"})],
-        "pnlss": [HasMethods(["fit", "get_params"]), None],
+        "pnlss": [PNLSSRegressor, None],
         "n_restarts": [Integers(1, None, closed="left")],
         "extrapolation": [StrOptions({"linear", "continue"})],
     }
@@ -380,6 +383,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
             The fitted estimator.
         """
         self._validate_params()
+        # Bad data is reported in this estimator's name, not its template's.
+        self._validate_training_data(X, y, sequence_id)
         pnlss = clone(self.pnlss if self.pnlss is not None else PNLSSRegressor())
         pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
         with warnings.catch_warnings():
@@ -388,12 +393,14 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
             # the result (the final optimisation warns for itself).
             warnings.simplefilter("ignore", ConvergenceWarning)
             self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
-        return super().fit(X, y, sequence_id=sequence_id)
+        return self._fit(X, y, sequence_id)
 
     def _centred(self):
         # The decoupled model replaces the PNLSS polynomials in the PNLSS's own
-        # coordinates.
-        return self.pnlss_.get_params()["center"]
+        # coordinates: those of the template, of which pnlss_ is a clone (and
+        # which the data validation before the PNLSS fit can already read).
+        template = self.pnlss if self.pnlss is not None else PNLSSRegressor()
+        return template.get_params()["center"]
 
     def _branch_degree(self):
         if self.branch_degree is not None:

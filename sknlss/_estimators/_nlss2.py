@@ -258,7 +258,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         Selection losses of the candidates, when ``alpha="auto"``.
     states_init_ : ndarray of shape (n_fitted_rows, n_states)
         States estimated from the linear model on the fitted rows (of the
-        kept start's initialisation).
+        kept start's initialisation). ``alpha_``, ``alpha_losses_`` and
+        ``states_init_`` belong to the networks' initialisation: they are not
+        set when the record is too short for the networks and the linear
+        model is kept without any start.
     n_params_ : int
         Number of free parameters: ``(n_states + n_outputs) * (n_states +
         n_inputs + 1 + n_neurons * (n_states + n_inputs + 2))``, plus

@@ -322,7 +322,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self.refit_n_iter_ = 0
         if self._underdetermined(problem):
             theta_best, result = self._fit_linear_part(problem, theta)
-            self.start_losses_, self.fell_back_to_linear_ = np.zeros(0), True
+            # No start could be made: each counts as left out.
+            self.start_losses_ = np.full(self.n_init, np.inf)
+            self.linear_loss_ = holdout_loss(problem_sets[0][min(shares)], theta_best)
+            self.fell_back_to_linear_ = True
         else:
             # Further candidates with more parameters than cost values are left out.
             problem_sets = problem_sets[:1] + [
