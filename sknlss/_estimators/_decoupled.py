@@ -385,7 +385,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self._validate_params()
         # Bad data is reported in this estimator's name, not its template's.
         self._validate_training_data(X, y, sequence_id)
-        pnlss = clone(self.pnlss if self.pnlss is not None else PNLSSRegressor())
+        pnlss = clone(self._template())
         pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
         with warnings.catch_warnings():
             # The PNLSS model is the starting point of the decoupling, which is
@@ -395,12 +395,14 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
             self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
         return self._fit(X, y, sequence_id)
 
+    def _template(self):
+        return self.pnlss if self.pnlss is not None else PNLSSRegressor()
+
     def _centred(self):
         # The decoupled model replaces the PNLSS polynomials in the PNLSS's own
         # coordinates: those of the template, of which pnlss_ is a clone (and
         # which the data validation before the PNLSS fit can already read).
-        template = self.pnlss if self.pnlss is not None else PNLSSRegressor()
-        return template.get_params()["center"]
+        return self._template().get_params()["center"]
 
     def _branch_degree(self):
         if self.branch_degree is not None:
