@@ -921,6 +921,21 @@ def test_too_few_cost_values_keep_the_linear_model():
     assert np.isfinite(model.predict(X)).all()
 
 
+@pytest.mark.parametrize("Estimator", [PNLSSRegressor, NLSS2Regressor, NLLFRRegressor,
+                                       DecoupledPNLSS])
+@pytest.mark.parametrize("validation_fraction, held_out", [("auto", "35%"), (0.0, None)])
+def test_a_transient_that_leaves_nothing_to_fit(Estimator, validation_fraction, held_out):
+    X, y = _clean_record(15, 120, 1, 1)
+    # The message names the estimator and the parameters as the user set them.
+    expected = rf"{Estimator.__name__}: n_transient=120 leaves no sample to fit"
+    if held_out is not None:
+        expected += (rf" before the held-out end of each sequence \(validation_fraction="
+                     rf"'auto' holds out its last {held_out}\)")
+    with pytest.raises(ValueError, match=expected + "; the longest sequence has 120"):
+        Estimator(n_states=2, n_transient=120,
+                  validation_fraction=validation_fraction).fit(X, y[:, 0])
+
+
 def test_booleans_are_not_integers():
     X, y = _clean_record(14, 60, 1, 1)
     for estimator, param in [(PNLSSRegressor(n_states=True), "n_states"),

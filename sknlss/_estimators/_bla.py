@@ -14,7 +14,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from threadpoolctl import threadpool_limits
 
 from .._core._model import StateSpaceModel
-from .._core._sequences import transient_mask
+from .._core._sequences import shortest_sequence, transient_mask
 from .._linear._frf import lpm_frf, robust_frf
 from .._linear._realization import (
     balanced_realization,
@@ -100,9 +100,7 @@ def _nonparametric(U, Y, starts, params):
                           max_frequency=params["max_frequency"])
     lengths = np.diff(starts)
     if lengths.min() - n_transient < 2:
-        k = int(np.argmin(lengths))
-        which = ("The record (X, y)" if lengths.size == 1 else
-                 f"The sequence of rows {starts[k]} to {starts[k + 1] - 1} (sequence_id)")
+        k, which = shortest_sequence(starts)
         raise ValueError(
             f"{which} has {lengths[k]} sample(s), {max(lengths[k] - n_transient, 0)} "
             f"after n_transient={n_transient}: the Local Polynomial Method needs at "

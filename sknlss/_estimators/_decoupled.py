@@ -383,8 +383,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
             The fitted estimator.
         """
         self._validate_params()
-        # Bad data is reported in this estimator's name, not its template's.
-        self._validate_training_data(X, y, sequence_id)
+        # Bad data, or a transient that leaves nothing to fit, is reported in
+        # this estimator's name, not its template's.
+        starts = self._validate_training_data(X, y, sequence_id)[2]
+        self._check_transient(starts, self._validation_shares(starts))
         pnlss = clone(self._template())
         pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
         with warnings.catch_warnings():

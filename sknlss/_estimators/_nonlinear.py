@@ -293,9 +293,29 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             LinearFallbackWarning, stacklevel=5)
         return True
 
+    def _check_transient(self, starts, shares):
+        """Refuse an ``n_transient`` that, with the held-out ends, leaves no row
+        to fit, in the terms of the parameters the user set."""
+        if self.period is not None:
+            return
+        lengths = np.diff(starts)
+        share = max(shares)
+        held_out = np.round(share * lengths).astype(int)
+        if np.any(lengths - held_out > self.n_transient):
+            return
+        longest = int(np.max(lengths))
+        ends = (f" before the held-out end of each sequence (validation_fraction="
+                f"{self.validation_fraction!r} holds out its last {share:.0%})"
+                if share else "")
+        raise ValueError(
+            f"{type(self).__name__}: n_transient={self.n_transient} leaves no sample "
+            f"to fit{ends}; the longest sequence has {longest} samples. Lower "
+            "n_transient or use a longer record.")
+
     def _fit_normalized(self, U, Y, starts):
         self._check_periodic(starts)
         shares = self._validation_shares(starts)
+        self._check_transient(starts, shares)
         self._check_model_size(U, Y, starts, shares)
         bla_rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
                             validation_fraction=max(shares), steady_state_period=self.period)
