@@ -2,6 +2,7 @@
 
 import itertools
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from sklearn.datasets import load_iris
 from sknlss import BLAEstimator
 from sknlss._estimators._bla import fit_linear_model
 from sknlss._linear._realization import pole_radius_limit
-from sknlss.datasets import make_cascaded_tanks, make_pnlss_reference
+from sknlss.datasets import make_cascaded_tanks, make_closed_loop_drive, make_pnlss_reference
 from sknlss.metrics import rms_error
 from sknlss.signals import multisine
 
@@ -145,6 +146,21 @@ def test_spare_state_stays_where_the_data_support_it(lpm_order):
             rms[n_states] = rms_error(data.y_test, bla.predict(data.X_test))
         ratios.append(rms[3] / rms[2])
     assert max(ratios) < 1.2
+
+
+def test_a_fit_worse_than_the_mean_warns():
+    """On this draw of the closed-loop drive, LPM lines at the edge of the
+    excited band pull the two-state fit onto a resonance at |p| = 0.9996 that
+    simulates the estimation record four times worse than its mean; the
+    narrower window of lpm_order=1 leaves them out."""
+    data = make_closed_loop_drive(random_state=1)
+    with pytest.warns(UserWarning, match=r"worse than the output's mean \(normalised RMS "
+                                         r"error [1-9].*try a lower lpm_order"):
+        BLAEstimator(n_states=2).fit(data.X_est, data.y_est)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        bla = BLAEstimator(n_states=2, lpm_order=1).fit(data.X_est, data.y_est)
+    assert bla.score(data.X_est, data.y_est) > 0.9
 
 
 def test_mimo_periodic():

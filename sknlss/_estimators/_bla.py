@@ -6,6 +6,7 @@ estimators call it for their initialisation and expose the result as a fitted
 :class:`BLAEstimator` in the user's units (:func:`fitted_bla`).
 """
 
+import warnings
 from dataclasses import dataclass
 from numbers import Real
 
@@ -22,6 +23,7 @@ from .._linear._realization import (
     frf_subspace,
     n_block_rows,
     refine_frf,
+    simulate_linear,
     ss_frf,
 )
 from .._validation import Integers
@@ -89,11 +91,15 @@ class LinearFit:
     loss_history: np.ndarray | None
 
 
+def _frf_method(params):
+    if params["method"] == "auto":
+        return "lpm" if params["period"] is None else "robust"
+    return params["method"]
+
+
 def _nonparametric(U, Y, starts, params):
-    method, period, n_transient = params["method"], params["period"], params["n_transient"]
-    if method == "auto":
-        method = "lpm" if period is None else "robust"
-    if method == "robust":
+    period, n_transient = params["period"], params["n_transient"]
+    if _frf_method(params) == "robust":
         if period is None:
             raise ValueError('method="robust" needs the `period` of the excitation.')
         return robust_frf(U, Y, starts, period, n_transient=n_transient,
@@ -170,6 +176,23 @@ def _fit_linear_model(U, Y, starts, params):
     return LinearFit(A, B, C, D, x0, output_offset, hsv, freqs, G, estimate.noise_variance,
                      estimate.total_variance, ss_frf(A, B, C, D, freqs), n_iter,
                      loss_history)
+
+
+def _simulation_nrmse(fit, U, Y, starts, mask):
+    """Largest RMS error over the outputs, relative to each output's standard
+    deviation, of the model's simulation over the rows ``mask`` from its
+    least-squares initial state; inf for a diverging simulation."""
+    x0, offset = estimate_initial_state(fit.A, fit.B, fit.C, fit.D, U, Y, starts, mask)
+    Y_sim, _, diverged = simulate_linear(fit.A, fit.B, fit.C, fit.D, U, starts,
+                                         np.tile(x0, (len(starts) - 1, 1)))
+    if diverged:
+        return np.inf
+    error = Y_sim[mask] + offset - Y[mask]
+    spread = np.std(Y[mask], axis=0)
+    rms = np.sqrt(np.mean(error**2, axis=0))
+    # A constant output is fitted exactly or not at all.
+    ratio = np.divide(rms, spread, out=np.where(rms > 0, np.inf, 0.0), where=spread > 0)
+    return float(np.max(ratio))
 
 
 def _set_fitted(bla, fit, normalisation):
@@ -368,6 +391,17 @@ class BLAEstimator(_BaseStateSpace):
     measured band the bound tightens with the distance to it, so to identify
     poles there, excite and measure up to them.
 
+    The fit warns when the model simulates its own estimation record worse
+    than the output's mean (from the least-squares initial state). Besides
+    data with little linear relation from input to output, this happens when
+    a few FRF lines far from the rest, at the edge of the excited band, pull
+    the fit onto an almost undamped resonance: the LPM lines where the
+    input's power fades (a band-limited reference in closed loop, leakage)
+    are the usual ones. A lower ``lpm_order``, whose window is
+    narrower, or a ``max_frequency`` below the band edge removes them. The
+    model is returned as fitted; the nonlinear estimators start from such a
+    model all the same.
+
     References
     ----------
     R. Pintelon and J. Schoukens, *System Identification: A Frequency Domain
@@ -438,8 +472,28 @@ class BLAEstimator(_BaseStateSpace):
         self.verbose = verbose
 
     def _fit_normalized(self, U, Y, starts):
-        _set_fitted(self, fit_linear_model(U, Y, starts, self.get_params()),
-                    normalisation_of(self))
+        fit = fit_linear_model(U, Y, starts, self.get_params())
+        _set_fitted(self, fit, normalisation_of(self))
+        self._warn_if_worse_than_the_mean(fit, U, Y, starts)
+
+    def _warn_if_worse_than_the_mean(self, fit, U, Y, starts):
+        """Warn when the model simulates its own estimation record worse than the
+        output's mean: such a model should not be taken silently."""
+        mask = transient_mask(starts, self.n_transient)
+        nrmse = _simulation_nrmse(fit, U, Y, starts, mask)
+        if nrmse <= 1.0:
+            return
+        remedy = ("a lower lpm_order (its narrower window), or a max_frequency below the "
+                  "edge of the excited band" if _frf_method(self.get_params()) == "lpm"
+                  else "a max_frequency below the edge of the excited band")
+        warnings.warn(
+            f"BLAEstimator(n_states={self.n_states}) simulates its estimation record "
+            f"worse than the output's mean (normalised RMS error {nrmse:.3g} from the "
+            "least-squares initial state). Either the data hold little linear relation "
+            "from X to y, or a few FRF lines far from the rest pull the fit, typically "
+            "at the edge of the excited band (input leakage, closed-loop data): compare "
+            f"frf_ with frf_model_ and try {remedy}.",
+            UserWarning, stacklevel=6)
 
     def _fitted_model(self):
         model = StateSpaceModel(self.A_.shape[0], self.B_.shape[1], self.C_.shape[0])
