@@ -483,9 +483,9 @@ class BLAEstimator(_BaseStateSpace):
         nrmse = _simulation_nrmse(fit, U, Y, starts, mask)
         if nrmse <= 1.0:
             return
-        remedy = ("a lower lpm_order (its narrower window), or a max_frequency below the "
-                  "edge of the excited band" if _frf_method(self.get_params()) == "lpm"
-                  else "a max_frequency below the edge of the excited band")
+        remedy = "a max_frequency below the edge of the excited band"
+        if _frf_method(self.get_params()) == "lpm" and self.lpm_order > 0:
+            remedy = f"a lower lpm_order (its narrower window), or {remedy}"
         warnings.warn(
             f"BLAEstimator(n_states={self.n_states}) simulates its estimation record "
             f"worse than the output's mean (normalised RMS error {nrmse:.3g} from the "
