@@ -51,15 +51,6 @@ def sequence_bounds(sequence_id, n_samples):
     return starts
 
 
-def shortest_sequence(starts):
-    """The index of the shortest sequence and its description for messages:
-    "The record (X, y)" or "The sequence of rows a to b (sequence_id)"."""
-    k = int(np.argmin(np.diff(starts)))
-    if len(starts) == 2:
-        return k, "The record (X, y)"
-    return k, f"The sequence of rows {starts[k]} to {starts[k + 1] - 1} (sequence_id)"
-
-
 def transient_mask(starts, n_transient):
     """Boolean mask of the rows kept once ``n_transient`` samples per sequence are dropped."""
     mask = np.ones(starts[-1], dtype=bool)

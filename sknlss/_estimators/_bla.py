@@ -15,7 +15,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from threadpoolctl import threadpool_limits
 
 from .._core._model import StateSpaceModel
-from .._core._sequences import shortest_sequence, transient_mask
+from .._core._sequences import transient_mask
 from .._linear._frf import lpm_frf, robust_frf
 from .._linear._realization import (
     balanced_realization,
@@ -27,6 +27,7 @@ from .._linear._realization import (
     ss_frf,
 )
 from .._validation import Integers
+from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
 
 # Variances below this fraction of the mean squared FRF magnitude (a relative
@@ -106,7 +107,9 @@ def _nonparametric(U, Y, starts, params):
                           max_frequency=params["max_frequency"])
     lengths = np.diff(starts)
     if lengths.min() - n_transient < 2:
-        k, which = shortest_sequence(starts)
+        k = int(np.argmin(lengths))
+        which = ("The record (X, y)" if lengths.size == 1 else
+                 f"The sequence of rows {starts[k]} to {starts[k + 1] - 1} (sequence_id)")
         raise ValueError(
             f"{which} has {lengths[k]} sample(s), {max(lengths[k] - n_transient, 0)} "
             f"after n_transient={n_transient}: the Local Polynomial Method needs at "
@@ -187,12 +190,7 @@ def _simulation_nrmse(fit, U, Y, starts, mask):
                                          np.tile(x0, (len(starts) - 1, 1)))
     if diverged:
         return np.inf
-    error = Y_sim[mask] + offset - Y[mask]
-    spread = np.std(Y[mask], axis=0)
-    rms = np.sqrt(np.mean(error**2, axis=0))
-    # A constant output is fitted exactly or not at all.
-    ratio = np.divide(rms, spread, out=np.where(rms > 0, np.inf, 0.0), where=spread > 0)
-    return float(np.max(ratio))
+    return float(np.max(nrmse(Y[mask], Y_sim[mask] + offset, multioutput="raw_values")))
 
 
 def _set_fitted(bla, fit, normalisation):
@@ -472,23 +470,23 @@ class BLAEstimator(_BaseStateSpace):
         self.verbose = verbose
 
     def _fit_normalized(self, U, Y, starts):
-        fit = fit_linear_model(U, Y, starts, self.get_params())
+        params = self.get_params()
+        fit = fit_linear_model(U, Y, starts, params)
         _set_fitted(self, fit, normalisation_of(self))
-        self._warn_if_worse_than_the_mean(fit, U, Y, starts)
+        self._warn_if_worse_than_the_mean(fit, U, Y, starts, params)
 
-    def _warn_if_worse_than_the_mean(self, fit, U, Y, starts):
+    def _warn_if_worse_than_the_mean(self, fit, U, Y, starts, params):
         """Warn when the model simulates its own estimation record worse than the
         output's mean: such a model should not be taken silently."""
-        mask = transient_mask(starts, self.n_transient)
-        nrmse = _simulation_nrmse(fit, U, Y, starts, mask)
-        if nrmse <= 1.0:
+        error = _simulation_nrmse(fit, U, Y, starts, transient_mask(starts, self.n_transient))
+        if error <= 1.0:
             return
         remedy = "a max_frequency below the edge of the excited band"
-        if _frf_method(self.get_params()) == "lpm" and self.lpm_order > 0:
+        if _frf_method(params) == "lpm" and self.lpm_order > 0:
             remedy = f"a lower lpm_order (its narrower window), or {remedy}"
         warnings.warn(
             f"BLAEstimator(n_states={self.n_states}) simulates its estimation record "
-            f"worse than the output's mean (normalised RMS error {nrmse:.3g} from the "
+            f"worse than the output's mean (normalised RMS error {error:.3g} from the "
             "least-squares initial state). Either the data hold little linear relation "
             "from X to y, or a few FRF lines far from the rest pull the fit, typically "
             "at the edge of the excited band (input leakage, closed-loop data): compare "

@@ -38,7 +38,7 @@ from .._core._memory import check_memory
 from .._core._model import StateSpaceModel
 from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
-from .._core._sequences import part_before_holdout, steady_state_rows
+from .._core._sequences import holdout_masks, part_before_holdout, steady_state_rows
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import LinearFallbackWarning
 from ._base import _BaseStateSpace, normalisation_of
@@ -298,19 +298,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         to fit, in the terms of the parameters the user set."""
         if self.period is not None:
             return
-        lengths = np.diff(starts)
         share = max(shares)
-        held_out = np.round(share * lengths).astype(int)
-        if np.any(lengths - held_out > self.n_transient):
-            return
-        longest = int(np.max(lengths))
-        ends = (f" before the held-out end of each sequence (validation_fraction="
-                f"{self.validation_fraction!r} holds out its last {share:.0%})"
-                if share else "")
-        raise ValueError(
-            f"{type(self).__name__}: n_transient={self.n_transient} leaves no sample "
-            f"to fit{ends}; the longest sequence has {longest} samples. Lower "
-            "n_transient or use a longer record.")
+        try:
+            holdout_masks(starts, self.n_transient, share)
+        except ValueError:
+            ends = (f" before the held-out end of each sequence (validation_fraction="
+                    f"{self.validation_fraction!r} holds out its last {share:.0%})"
+                    if share else "")
+            raise ValueError(
+                f"{type(self).__name__}: n_transient={self.n_transient} leaves no sample "
+                f"to fit{ends}; the longest sequence has {np.max(np.diff(starts))} "
+                "samples. Lower n_transient or use a longer record.") from None
 
     def _fit_normalized(self, U, Y, starts):
         self._check_periodic(starts)
