@@ -121,17 +121,19 @@ def branch_input(X):
     return (states @ nllfr.Cz_.T + u @ nllfr.Dz_.T)[:, 0]
 
 
-# Beyond the range of z on the estimation record, ``branch_input_range_``,
-# the model continues f along its tangent (``extrapolation="linear"``, the
-# default); ``extrapolation="continue"`` would keep the basis combination,
-# which for a cubic spring is the physical law.
+# Beyond the range that z takes on the estimation record, a power series
+# keeps its curvature and a bounded basis goes on along its tangent
+# (``extrapolation="auto"``, the default; ``extrapolation_`` says which the
+# model applies). For a cubic spring the curvature is the physical law. The
+# figure shows both continuations of the fitted f.
 z_test = branch_input(test.X)
-low, high = nllfr.branch_input_range_[:, 0]
+z_est = branch_input(data.X_est)
+low, high = z_est.min(), z_est.max()
 grid = np.linspace(min(low, z_test.min()), max(high, z_test.max()), 400)
 inside = np.clip(grid, low, high)
 values, slopes = basis.evaluate(inside)
 coefficients = nllfr.coefficients_[0]
-w = values @ coefficients + (slopes @ coefficients) * (grid - inside)
+w_tangent = values @ coefficients + (slopes @ coefficients) * (grid - inside)
 w_basis = basis.evaluate(grid)[0] @ coefficients
 term = "z^{}" if isinstance(basis, PolynomialBasis) else "P_{}(tanh z)"
 print("f(z) = " + " + ".join(f"{c:.4g} {term.format(d)}"
@@ -140,15 +142,18 @@ print(f"z on the estimation record: {low:.3f} to {high:.3f}; "
       f"on '{record}': {z_test.min():.3f} to {z_test.max():.3f}")
 print(f"'{record}' takes z below the estimation range in "
       f"{np.count_nonzero(z_test < low)} samples, above it in "
-      f"{np.count_nonzero(z_test > high)}")
+      f"{np.count_nonzero(z_test > high)}; the model continues f with "
+      f"extrapolation_={nllfr.extrapolation_!r}")
 
+applied = {"continue": "basis combination", "linear": "tangent"}[nllfr.extrapolation_]
 fig, ax = plt.subplots(figsize=(8, 4), layout="constrained")
 ax.axvspan(low, high, color="0.9", label="range on the estimation record")
 ax.plot(grid, w_basis, "C1--", label='basis combination ("continue")')
-ax.plot(grid, w, "C0-", label='fitted f(z) ("linear", the model)')
+ax.plot(grid, w_tangent, "C0:", label='tangent beyond the range ("linear")')
 ax.set_xlabel("branch input z (normalised units)")
 ax.set_ylabel("branch output w = f(z)")
 ax.grid(True, alpha=0.3)
 ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
-ax.set_title(f"NL-LFR nonlinearity, over the range of z on '{record}'")
+ax.set_title(f"NL-LFR nonlinearity over the range of z on '{record}' "
+             f"(the model: {applied})")
 plt.show()

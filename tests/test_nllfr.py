@@ -82,7 +82,6 @@ def test_extrapolation_changes_only_predictions_beyond_the_estimation_range(reco
     continued = NLLFRRegressor(extrapolation="continue", **options).fit(u, y)
     np.testing.assert_array_equal(linear.predict(u), continued.predict(u))
     np.testing.assert_array_equal(continued.branch_input_range_, [[-np.inf], [np.inf]])
-    # The range of the branch input z = Cz x + Dz u on the estimation record.
     # The range of the branch input z = Cz x + Dz u on the estimation record
     # (normalised signals).
     states = linear.simulate(u, return_states=True)[1]
@@ -93,6 +92,23 @@ def test_extrapolation_changes_only_predictions_beyond_the_estimation_range(reco
         beyond = continued.predict(4.0 * u_test)
     assert np.all(np.isfinite(linear.predict(4.0 * u_test)))
     assert not np.allclose(linear.predict(4.0 * u_test), beyond, equal_nan=True)
+
+
+@pytest.mark.parametrize("basis, continuation", [(PolynomialBasis(3), "continue"),
+                                                 (LegendreBasis(3), "linear")])
+def test_auto_extrapolation_follows_the_basis(basis, continuation, records):
+    # The default: a power series keeps its curvature beyond the estimation
+    # range, a bounded basis goes on along its tangent.
+    u, y, u_test, _ = records
+    options = dict(n_states=2, basis=basis, max_iter=10, random_state=0)
+    auto = NLLFRRegressor(**options).fit(u, y)
+    explicit = NLLFRRegressor(extrapolation=continuation, **options).fit(u, y)
+    assert auto.extrapolation_ == explicit.extrapolation_ == continuation
+    np.testing.assert_array_equal(auto.branch_input_range_, explicit.branch_input_range_)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SimulationDivergedWarning)
+        np.testing.assert_array_equal(auto.predict(4.0 * u_test),
+                                      explicit.predict(4.0 * u_test))
 
 
 def test_bounded_bases_stay_bounded():

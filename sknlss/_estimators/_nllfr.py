@@ -64,6 +64,20 @@ _INFERENCE_TOL = 1e-6
 _INFERENCE_PENALTY = 1e3
 
 
+def _continuation(extrapolation, basis):
+    """How branches of ``basis`` go on beyond their estimation range.
+
+    With ``"auto"`` a power series keeps its curvature and a bounded basis
+    goes on along its tangent: the basis the held-out end preferred tells a
+    hardening law from a saturating one, which the continuation follows.
+    Decided on simulated records whose test input leaves the estimation range
+    (see the user guide).
+    """
+    if extrapolation != "auto":
+        return extrapolation
+    return "continue" if isinstance(basis, PolynomialBasis) else "linear"
+
+
 def _branch_inputs(V, S, rows):
     """Branch inputs ``S @ V`` with each direction scaled so that ``|z| <= 1``
     on ``rows``."""
@@ -263,13 +277,19 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         turn, so that the held-out loss chooses between a power series and a
         bounded nonlinearity (with ``n_init=1``, the powers only); see
         ``basis_``.
-    extrapolation : {"linear", "continue"}, default="linear"
+    extrapolation : {"auto", "linear", "continue"}, default="auto"
         How each branch function goes on beyond the range its input took on
-        the estimation record (``branch_input_range_``): along its tangent at
-        the nearer end of that range, so that where the data did not go the
-        branch grows no faster than linearly, or as the basis combination
-        itself (a polynomial keeps its curvature). The fit is the same either
-        way; only predictions beyond that range differ.
+        the estimation record (``branch_input_range_``). ``"linear"``: along
+        its tangent at the nearer end of that range, so that where the data
+        did not go the branch grows no faster than linearly. ``"continue"``:
+        as the basis combination itself (a polynomial keeps its curvature).
+        ``"auto"``: a :class:`~sknlss.PolynomialBasis` continues, a bounded
+        basis goes on along its tangent. With ``basis=None`` the held-out end
+        chooses between the two kinds, and with it the continuation: a
+        hardening law (a cubic spring) picks the powers, a saturating one the
+        bounded basis (see the user guide). The fit is the same whatever the
+        option; only predictions beyond that range differ
+        (``extrapolation_``).
     init : {"trajectory", "inference"}, default="trajectory"
         How each start sets the branches. ``"trajectory"``: the branch inputs
         are fixed along the BLA's trajectory, and the branch outputs and
@@ -374,8 +394,11 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         The basis of the kept model (the chosen one with ``basis=None``).
     branch_input_range_ : ndarray of shape (2, n_branches)
         Lowest and highest value of each branch input on the estimation
-        record simulated by the fitted model (``-inf`` and ``inf`` with
-        ``extrapolation="continue"``).
+        record simulated by the fitted model (``-inf`` and ``inf`` where the
+        branches continue as their basis).
+    extrapolation_ : {"linear", "continue"}
+        The continuation of the branches beyond ``branch_input_range_``
+        (``extrapolation``, with ``"auto"`` resolved for ``basis_``).
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
     bla_ : BLAEstimator
@@ -450,14 +473,14 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         **_BaseNonlinearStateSpace._parameter_constraints,
         "n_branches": [Integers(1, None, closed="left")],
         "basis": [HasMethods(["evaluate"]), None],
-        "extrapolation": [StrOptions({"linear", "continue"})],
+        "extrapolation": [StrOptions({"auto", "linear", "continue"})],
         "init": [StrOptions({"trajectory", "inference"})],
     }
 
     _label = "NL-LFR"
     _structure_params = ("n_states", "n_branches", "basis")
 
-    def __init__(self, n_states=2, *, n_branches=1, basis=None, extrapolation="linear",
+    def __init__(self, n_states=2, *, n_branches=1, basis=None, extrapolation="auto",
                  init="trajectory", estimate_x0=False, period=None, cost="time",
                  stability_penalty=0.0, weight_decay=0.0, refine_linear=False, bla=None,
                  max_iter=100, tol=1e-9, validation_fraction="auto", refit=False,
@@ -502,7 +525,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
             for basis in self._bases())
 
     def _prediction_terms(self, model, theta, U, starts):
-        return branch_prediction_terms(model, theta, U, starts, self.extrapolation)
+        return branch_prediction_terms(model, theta, U, starts,
+                                       _continuation(self.extrapolation, model.terms.basis))
 
     def _n_drop(self, model):
         # Similarity transforms of the states, the scaling of each branch's
@@ -557,6 +581,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.coefficients_ = values["coefficients"]
         self.basis_ = self._model.terms.basis
         self.branch_input_range_ = self._model.terms.input_range
+        self.extrapolation_ = _continuation(self.extrapolation, self.basis_)
 
     def _terms_values(self):
         return {"V": np.vstack([self.Cz_.T, self.Dz_.T]), "coefficients": self.coefficients_,
