@@ -283,13 +283,13 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         its tangent at the nearer end of that range, so that where the data
         did not go the branch grows no faster than linearly. ``"continue"``:
         as the basis combination itself (a polynomial keeps its curvature).
-        ``"auto"``: a :class:`~sknlss.PolynomialBasis` continues, a bounded
-        basis goes on along its tangent. With ``basis=None`` the held-out end
-        chooses between the two kinds, and with it the continuation: a
-        hardening law (a cubic spring) picks the powers, a saturating one the
-        bounded basis (see the user guide). The fit is the same whatever the
-        option; only predictions beyond that range differ
-        (``extrapolation_``).
+        ``"auto"``: a :class:`~sknlss.PolynomialBasis` continues, any other
+        basis (the bounded ones) goes on along its tangent. With
+        ``basis=None`` the held-out end chooses between the two kinds, and
+        with it the continuation: a hardening law (a cubic spring) picks the
+        powers, a saturating one the bounded basis (see the user guide). The
+        fit is the same whatever the option; only predictions beyond that
+        range differ (``extrapolation_``).
     init : {"trajectory", "inference"}, default="trajectory"
         How each start sets the branches. ``"trajectory"``: the branch inputs
         are fixed along the BLA's trajectory, and the branch outputs and
