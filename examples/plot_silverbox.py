@@ -121,14 +121,13 @@ def branch_input(X):
     return (states @ nllfr.Cz_.T + u @ nllfr.Dz_.T)[:, 0]
 
 
-# Beyond the range that z takes on the estimation record, a power series
-# keeps its curvature and a bounded basis goes on along its tangent
-# (``extrapolation="auto"``, the default; ``extrapolation_`` says which the
-# model applies). For a cubic spring the curvature is the physical law. The
-# figure shows both continuations of the fitted f.
+# Beyond the range of z on the estimation record, ``branch_input_range_``, a
+# power series keeps its curvature and a bounded basis goes on along its
+# tangent (``extrapolation="auto"``, the default; ``extrapolation_`` says
+# which the model applies). For a cubic spring the curvature is the physical
+# law. The figure shows both continuations of the fitted f.
 z_test = branch_input(test.X)
-z_est = branch_input(data.X_est)
-low, high = z_est.min(), z_est.max()
+low, high = nllfr.branch_input_range_[:, 0]
 grid = np.linspace(min(low, z_test.min()), max(high, z_test.max()), 400)
 inside = np.clip(grid, low, high)
 values, slopes = basis.evaluate(inside)

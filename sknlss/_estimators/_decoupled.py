@@ -210,8 +210,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``branch_coefficients_[l, k]`` multiplies ``(v_l^T s)**(k + 2)``.
     branch_input_range_ : ndarray of shape (2, rank)
         Lowest and highest value of each branch input on the estimation
-        record simulated by the fitted model (``-inf`` and ``inf`` with
-        ``extrapolation="continue"``).
+        record simulated by the fitted model: beyond it the branches go on as
+        ``extrapolation`` says.
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
     pnlss_ : PNLSSRegressor

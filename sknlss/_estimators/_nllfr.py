@@ -394,8 +394,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         The basis of the kept model (the chosen one with ``basis=None``).
     branch_input_range_ : ndarray of shape (2, n_branches)
         Lowest and highest value of each branch input on the estimation
-        record simulated by the fitted model (``-inf`` and ``inf`` where the
-        branches continue as their basis).
+        record simulated by the fitted model: beyond it the branches go on as
+        ``extrapolation_`` says.
     extrapolation_ : {"linear", "continue"}
         The continuation of the branches beyond ``branch_input_range_``
         (``extrapolation``, with ``"auto"`` resolved for ``basis_``).

@@ -500,16 +500,15 @@ def _with_linear_part(model, linear):
 
 
 def branch_prediction_terms(model, theta, U, starts, extrapolation):
-    """The branch terms of ``model`` for prediction: with ``extrapolation="linear"``,
-    continued along their tangents beyond the range that each branch input
-    takes when ``theta`` simulates the estimation record ``U``; with
-    ``"continue"``, the basis combinations everywhere."""
-    if extrapolation == "continue":
-        return model.terms
+    """The branch terms of ``model`` for prediction, with the range that each
+    branch input takes when ``theta`` simulates the estimation record ``U``:
+    beyond it, with ``extrapolation="linear"``, the branches go on along their
+    tangents; with ``"continue"``, as the basis combinations."""
     _, X, _ = model.simulate(theta, U, starts)
     S = np.hstack([X, U])
     return model.terms.with_input_range(model.unpack(theta)["V"],
-                                        S[np.all(np.isfinite(S), axis=1)])
+                                        S[np.all(np.isfinite(S), axis=1)],
+                                        continued=extrapolation == "continue")
 
 
 def n_cost_values(problem):

@@ -133,13 +133,17 @@ class BranchTerms(Terms):
         its function is the basis combination; beyond, the function continues
         along its tangent at the nearer end. ``None``: the basis combination
         everywhere.
+    continued : bool, default=False
+        Keep the basis combination beyond ``input_range`` too (the range is
+        then only a record of where the branch inputs went).
     """
 
     evaluate = staticmethod(_evaluate)
     state_jacobian = staticmethod(_state_jacobian)
     parameter_jacobian = staticmethod(_parameter_jacobian)
 
-    def __init__(self, n_states, n_inputs, n_outputs, rank, basis, input_range=None):
+    def __init__(self, n_states, n_inputs, n_outputs, rank, basis, input_range=None,
+                 continued=False):
         degrees = basis.degrees
         n_vars, n_fun = n_states + n_inputs, len(degrees)
         self.basis = basis
@@ -152,20 +156,24 @@ class BranchTerms(Terms):
         if input_range is None:
             input_range = np.array([[-np.inf], [np.inf]]).repeat(rank, axis=1)
         self.input_range = np.asarray(input_range, dtype=np.float64)
+        self.continued = continued
 
     @property
     def work_init(self):
-        """The work array with the input range at its head."""
+        """The work array with, at its head, the range beyond which the branches
+        go on along their tangents (unbounded when they are continued)."""
         work = np.zeros(self.work_size)
-        work[: 2 * self.rank] = self.input_range.ravel()
+        bounds = np.array([[-np.inf], [np.inf]]) if self.continued else self.input_range
+        work[: 2 * self.rank] = np.broadcast_to(bounds, (2, self.rank)).ravel()
         return work
 
-    def with_input_range(self, V, S):
-        """The same terms continued linearly beyond the range that the branch
-        inputs ``V^T s`` take at the points ``S = [x; u]``."""
+    def with_input_range(self, V, S, continued=False):
+        """The same terms with the range that the branch inputs ``V^T s`` take
+        at the points ``S = [x; u]``, beyond which they go on along their
+        tangents, or as the basis combination when ``continued``."""
         Z = S @ V
         return BranchTerms(*self.dimensions, self.rank, self.basis,
-                           np.vstack([Z.min(axis=0), Z.max(axis=0)]))
+                           np.vstack([Z.min(axis=0), Z.max(axis=0)]), continued)
 
     @staticmethod
     def layout(n_states, n_inputs, n_outputs, rank, n_functions):
