@@ -581,7 +581,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.coefficients_ = values["coefficients"]
         self.basis_ = self._model.terms.basis
         self.branch_input_range_ = self._model.terms.input_range
-        self.extrapolation_ = _continuation(self.extrapolation, self.basis_)
+        self.extrapolation_ = "continue" if self._model.terms.continued else "linear"
 
     def _terms_values(self):
         return {"V": np.vstack([self.Cz_.T, self.Dz_.T]), "coefficients": self.coefficients_,

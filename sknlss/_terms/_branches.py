@@ -25,6 +25,9 @@ from ._bases import basis_functions
 #         phi' (r x n_functions)]; the range [lower, upper] of each branch input,
 # beyond which its function continues linearly, is set by work_init.
 _HEADER = 3
+# The range of a branch input that no branch leaves: the basis combination
+# everywhere.
+_UNBOUNDED = np.array([[-np.inf], [np.inf]])
 
 
 @njit(cache=True, inline="always")
@@ -154,7 +157,7 @@ class BranchTerms(Terms):
         self.work_size = 4 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
         if input_range is None:
-            input_range = np.array([[-np.inf], [np.inf]]).repeat(rank, axis=1)
+            input_range = _UNBOUNDED.repeat(rank, axis=1)
         self.input_range = np.asarray(input_range, dtype=np.float64)
         self.continued = continued
 
@@ -163,7 +166,7 @@ class BranchTerms(Terms):
         """The work array with, at its head, the range beyond which the branches
         go on along their tangents (unbounded when they are continued)."""
         work = np.zeros(self.work_size)
-        bounds = np.array([[-np.inf], [np.inf]]) if self.continued else self.input_range
+        bounds = _UNBOUNDED if self.continued else self.input_range
         work[: 2 * self.rank] = np.broadcast_to(bounds, (2, self.rank)).ravel()
         return work
 
