@@ -31,6 +31,11 @@ TERMS = {
     "branches-legendre": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 2, LegendreBasis(3)),
     "branches-chebyshev": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 1,
                                                           ChebyshevBasis(4)),
+    # A box that the states and inputs of the test data leave on both sides,
+    # one or several variables at a time.
+    "polynomial-bounded": lambda n, n_u, n_y: PolynomialTerms(
+        n, n_y, monomial_exponents(n, n_u, (2, 3)), monomial_exponents(n, n_u, (2, 3)),
+        input_range=np.array([[-0.3], [0.2]]).repeat(n + n_u, axis=1)),
     # Ranges that the branch inputs of the test data leave on both sides.
     "branches-continued": lambda n, n_u, n_y: BranchTerms(
         n, n_u, n_y, 2, PolynomialBasis(3), input_range=np.array([[-0.02, -0.01],

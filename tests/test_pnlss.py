@@ -141,6 +141,31 @@ def _fit_quiet(model, *args, **kwargs):
         return model.fit(*args, **kwargs)
 
 
+def test_extrapolation_changes_only_predictions_beyond_the_estimation_box():
+    rng = np.random.default_rng(0)
+    u = 0.2 * rng.normal(size=(400, 1))
+    y = _quadratic_system(u)
+    options = dict(n_states=1, degree=2, max_iter=20, **PLAIN)
+    linear = _fit_quiet(PNLSSRegressor(extrapolation="linear", **options), u, y)
+    continued = _fit_quiet(PNLSSRegressor(extrapolation="continue", **options), u, y)
+    np.testing.assert_array_equal(linear.E_, continued.E_)
+    np.testing.assert_array_equal(linear.predict(u), continued.predict(u))
+    # The box is where the states and the scaled inputs went, whatever the
+    # continuation.
+    np.testing.assert_array_equal(linear.polynomial_input_range_,
+                                  continued.polynomial_input_range_)
+    S = np.hstack([linear.simulate(u, return_states=True)[1],
+                   (u - linear.u_offset_) / linear.u_scale_])
+    np.testing.assert_allclose(linear.polynomial_input_range_, [S.min(axis=0), S.max(axis=0)])
+    # Beyond the box the quadratic goes on along its tangent: the model stays
+    # bounded on an input that takes the polynomial itself away.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SimulationDivergedWarning)
+        beyond = continued.predict(3.0 * u)
+    assert np.all(np.isfinite(linear.predict(3.0 * u)))
+    assert not np.allclose(linear.predict(3.0 * u), beyond, equal_nan=True)
+
+
 def test_initial_state_and_validation_split():
     rng = np.random.default_rng(0)
     u = 0.2 * rng.normal(size=(500, 1))

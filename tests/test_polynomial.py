@@ -131,3 +131,28 @@ def test_jacobian_finite_differences(structure):
         dS[j] = h
         fd = (evaluate_monomials(S + dS, exps) - evaluate_monomials(S - dS, exps)) / (2 * h)
         np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-8)
+
+
+def test_terms_continue_along_tangent_planes_beyond_their_box():
+    from sknlss._core._model import StateSpaceModel
+    from sknlss._terms._polynomial import PolynomialTerms
+
+    rng = np.random.default_rng(3)
+    exponents = monomial_exponents(2, 1, (2, 3))
+    box = np.array([[-0.2, -0.1, -0.5], [0.1, 0.3, 0.4]])
+    model = StateSpaceModel(2, 1, 1, PolynomialTerms(2, 1, exponents, exponents, box))
+    values = {name: 0.3 * rng.standard_normal(shape) for name, shape in model.blocks}
+    values["A"] = 0.5 * np.eye(2)
+    U = rng.standard_normal((60, 1))
+    Y, X, diverged = model.simulate(model.pack(values), U, np.array([0, 60]),
+                                    x0=np.array([0.1, -0.2]))
+    assert not diverged
+    S = np.hstack([X, U])
+    # Points beyond the box on either side, in one variable and in several at once.
+    outside = (S < box[0]) | (S > box[1])
+    assert np.any(S < box[0]) and np.any(S > box[1]) and np.any(outside.sum(axis=1) > 1)
+    nearest = np.clip(S, *box)
+    slopes = monomial_jacobian(nearest, exponents)
+    eta = evaluate_monomials(nearest, exponents) + np.einsum("tkj,tj->tk", slopes, S - nearest)
+    expected = X @ values["C"].T + U @ values["D"].T + eta @ values["F"].T
+    np.testing.assert_allclose(Y, expected, rtol=1e-12, atol=1e-14)

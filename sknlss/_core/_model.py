@@ -25,6 +25,12 @@ def _contiguous(U, starts):
     return _array(U), _array(starts, np.int64)
 
 
+#: The range of a variable that no point leaves, shape (2, 1): terms that go
+#: on along their tangents beyond a range (the branches, the monomials) are
+#: themselves everywhere with it.
+UNBOUNDED = np.array([[-np.inf], [np.inf]])
+
+
 def parameter_count(blocks):
     """Number of parameters in blocks ``(name, shape)`` (exact for any size)."""
     return sum(math.prod(shape) for _, shape in blocks)

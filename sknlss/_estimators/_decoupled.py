@@ -20,7 +20,7 @@ from .._terms._branches import BranchTerms
 from .._terms._cpd import decouple_polynomial
 from .._validation import Integers
 from ._base import _unfitted_on_error
-from ._nonlinear import _BaseNonlinearStateSpace, branch_prediction_terms
+from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
 from ._pnlss import PNLSSRegressor
 
 # Factors applied to W when the decoupled initial model diverges on the
@@ -424,7 +424,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
                                                   self.rank, n_functions))
 
     def _prediction_terms(self, model, theta, U, starts):
-        return branch_prediction_terms(model, theta, U, starts, self.extrapolation)
+        return ranged_prediction_terms(model, theta, U, starts, self.extrapolation)
 
     def _n_drop(self, model):
         # Similarity transforms of the states and the scaling of each branch's

@@ -35,7 +35,7 @@ from .._linear._realization import simulate_linear, ss_frf
 from .._terms._bases import LegendreBasis, PolynomialBasis
 from .._terms._branches import BranchTerms
 from .._validation import Integers
-from ._nonlinear import _BaseNonlinearStateSpace, branch_prediction_terms
+from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
 
 #: The bases that ``basis=None`` chooses from, the starts taking them in turn.
 #: Decided on the estimation records (Silverbox and Cascaded Tanks, each split
@@ -525,7 +525,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
             for basis in self._bases())
 
     def _prediction_terms(self, model, theta, U, starts):
-        return branch_prediction_terms(model, theta, U, starts,
+        return ranged_prediction_terms(model, theta, U, starts,
                                        _continuation(self.extrapolation, model.terms.basis))
 
     def _n_drop(self, model):

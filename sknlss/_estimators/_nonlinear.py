@@ -499,15 +499,14 @@ def _with_linear_part(model, linear):
     return model.pack(values)
 
 
-def branch_prediction_terms(model, theta, U, starts, extrapolation):
-    """The branch terms of ``model`` for prediction, with the range that each
-    branch input takes when ``theta`` simulates the estimation record ``U``:
-    beyond it, with ``extrapolation="linear"``, the branches go on along their
-    tangents; with ``"continue"``, as the basis combinations."""
+def ranged_prediction_terms(model, theta, U, starts, extrapolation):
+    """The terms of ``model`` for prediction, with the range that their inputs
+    take when ``theta`` simulates the estimation record ``U``: beyond it, with
+    ``extrapolation="linear"``, the terms go on along their tangents; with
+    ``"continue"``, as themselves (the range is then only recorded)."""
     _, X, _ = model.simulate(theta, U, starts)
     S = np.hstack([X, U])
-    return model.terms.with_input_range(model.unpack(theta)["V"],
-                                        S[np.all(np.isfinite(S), axis=1)],
+    return model.terms.with_input_range(model.unpack(theta), S[np.all(np.isfinite(S), axis=1)],
                                         continued=extrapolation == "continue")
 
 

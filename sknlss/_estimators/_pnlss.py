@@ -13,7 +13,7 @@ from sklearn.utils._param_validation import StrOptions
 
 from .._terms._polynomial import STRUCTURES, PolynomialTerms, monomial_exponents, n_monomials
 from .._validation import Integers, naming
-from ._nonlinear import _BaseNonlinearStateSpace
+from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
 
 # Size of the random polynomial coefficients of the starts after the first,
 # relative to the RMS of each monomial along the linear model's trajectory: a
@@ -48,6 +48,16 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         powers only, those in u only, or an explicit exponent array.
     output_terms : same as ``state_terms``, default="full"
         Monomials of the output equation.
+    extrapolation : {"continue", "linear"}, default="continue"
+        How the polynomials go on beyond the box that the states and inputs
+        filled on the estimation record (``polynomial_input_range_``, each
+        variable's range). ``"continue"``: as themselves (a polynomial keeps
+        its curvature, which suits a hardening law such as a cubic spring).
+        ``"linear"``: along their tangent planes at the nearest point of the
+        box, so that where the data did not go the terms grow no faster than
+        linearly (for saturation, friction, or a state, such as a position,
+        that leaves its range without the law changing). The fit is the same
+        either way; only predictions beyond the box differ.
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences (PNLSS-I);
         ``predict`` then starts from the fitted ``x0_``.
@@ -152,6 +162,11 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         Exponents of the monomials in zeta.
     output_exponents_ : ndarray of shape (n_eta, n_states + n_inputs)
         Exponents of the monomials in eta.
+    polynomial_input_range_ : ndarray of shape (2, n_states + n_inputs)
+        Lowest and highest value of each state and input (in the scaled units
+        the polynomials see) on the estimation record simulated by the fitted
+        model: beyond this box the polynomials go on as ``extrapolation``
+        says.
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
     n_params_ : int
@@ -223,6 +238,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         "state_terms": [StrOptions(set(STRUCTURES)), "array-like"],
         "output_terms": [StrOptions(set(STRUCTURES)), "array-like"],
         "center": ["boolean"],
+        "extrapolation": [StrOptions({"continue", "linear"})],
     }
 
     _label = "PNLSS"
@@ -235,6 +251,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         degree=(2, 3),
         state_terms="full",
         output_terms="full",
+        extrapolation="continue",
         estimate_x0=False,
         center=True,
         refine_linear=False,
@@ -258,6 +275,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         self.degree = degree
         self.state_terms = state_terms
         self.output_terms = output_terms
+        self.extrapolation = extrapolation
         self.estimate_x0 = estimate_x0
         self.center = center
         self.refine_linear = refine_linear
@@ -319,8 +337,12 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
             candidates.append(candidate)
         return candidates
 
+    def _prediction_terms(self, model, theta, U, starts):
+        return ranged_prediction_terms(model, theta, U, starts, self.extrapolation)
+
     def _set_terms(self, values):
         self.E_, self.F_ = values["E"], values["F"]
+        self.polynomial_input_range_ = self._model.terms.input_range
 
     def _terms_values(self):
         return {"E": self.E_, "F": self.F_}

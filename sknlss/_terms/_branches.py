@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
-from .._core._model import Terms
+from .._core._model import UNBOUNDED, Terms
 from ._bases import basis_functions
 
 # spec = [rank, n_functions, basis code, degrees ...]
@@ -25,9 +25,6 @@ from ._bases import basis_functions
 #         phi' (r x n_functions)]; the range [lower, upper] of each branch input,
 # beyond which its function continues linearly, is set by work_init.
 _HEADER = 3
-# The range of a branch input that no branch leaves: the basis combination
-# everywhere.
-_UNBOUNDED = np.array([[-np.inf], [np.inf]])
 
 
 @njit(cache=True, inline="always")
@@ -157,7 +154,7 @@ class BranchTerms(Terms):
         self.work_size = 4 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
         if input_range is None:
-            input_range = _UNBOUNDED.repeat(rank, axis=1)
+            input_range = UNBOUNDED.repeat(rank, axis=1)
         self.input_range = np.asarray(input_range, dtype=np.float64)
         self.continued = continued
 
@@ -166,15 +163,16 @@ class BranchTerms(Terms):
         """The work array with, at its head, the range beyond which the branches
         go on along their tangents (unbounded when they are continued)."""
         work = np.zeros(self.work_size)
-        bounds = _UNBOUNDED if self.continued else self.input_range
+        bounds = UNBOUNDED if self.continued else self.input_range
         work[: 2 * self.rank] = np.broadcast_to(bounds, (2, self.rank)).ravel()
         return work
 
-    def with_input_range(self, V, S, continued=False):
+    def with_input_range(self, values, S, continued=False):
         """The same terms with the range that the branch inputs ``V^T s`` take
-        at the points ``S = [x; u]``, beyond which they go on along their
-        tangents, or as the basis combination when ``continued``."""
-        Z = S @ V
+        at the points ``S = [x; u]`` (``V`` from the parameter blocks
+        ``values``), beyond which they go on along their tangents, or as the
+        basis combination when ``continued``."""
+        Z = S @ values["V"]
         return BranchTerms(*self.dimensions, self.rank, self.basis,
                            np.vstack([Z.min(axis=0), Z.max(axis=0)]), continued)
 

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
-from .._core._model import Terms
+from .._core._model import UNBOUNDED, Terms
 
 #: Monomial selections understood by :func:`monomial_exponents`.
 STRUCTURES = ("full", "states_only", "no_cross_products", "inputs_only")
@@ -180,6 +180,8 @@ def monomial_exponents(n_states, n_inputs, degree, structure="full"):
 # work = [powers (n_vars x width), monomials (n_monomials),
 #         derivatives (n_monomials x n_diff)]
 #
+# (the terms append the box of the tangent continuation, see below)
+#
 # with ``work[j * width + p] = s_j ** p`` and n_factors the largest number of
 # variables in a monomial. Row k of ``factors`` holds the number of variables
 # of monomial k, then the positions in work of their powers, whose product is
@@ -216,9 +218,11 @@ def _monomial_spec(exponents, n_diff):
     return np.concatenate([header, factors.ravel(), *entries]).astype(np.int64)
 
 
+@njit(cache=True, inline="always")
 def _work_size(spec):
-    n_vars, n_monomials, width, _, n_diff, _ = spec[:_HEADER]
-    return int(n_vars * width + n_monomials * (1 + n_diff))
+    """Size of the monomials' work (where the terms' box starts)."""
+    n_vars, n_monomials, width, n_diff = spec[0], spec[1], spec[2], spec[4]
+    return n_vars * width + n_monomials * (1 + n_diff)
 
 
 @njit(cache=True, inline="always")
@@ -365,10 +369,97 @@ def _containing(exponents, n_states):
     return bounds, np.concatenate([np.zeros(0, dtype=np.int64), *rows])
 
 
+# Beyond a box [lower, upper] of the points s (the range that each variable
+# took on the estimation record), the monomials go on along their tangent
+# planes at the nearest point c = clip(s) of the box:
+#
+#   m(s) = m(c) + sum_j dm/ds_j(c) (s_j - c_j),
+#
+# whose derivative with respect to a state x_i is dm/dx_i(c) when x_i is
+# clipped, and dm/dx_i(c) + sum_j d2m/dx_i ds_j(c) (s_j - c_j) when it is
+# not. The terms' work array ends with [lower (n_vars), upper (n_vars),
+# c (n_vars), clipped], ``clipped`` telling the state Jacobian whether the
+# point of the last evaluation was outside; an unbounded box leaves every
+# point inside, where nothing else changes.
+@njit(cache=True, inline="always")
+def _inside(s, work, o_box):
+    n_vars = s.shape[0]
+    for j in range(n_vars):
+        if not work[o_box + j] <= s[j] <= work[o_box + n_vars + j]:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _factor(spec, width, row, f):
+    """Variable and exponent of factor ``f`` of the monomial at ``row``."""
+    j = spec[row + 1 + f] // width
+    return j, spec[row + 1 + f] - j * width
+
+
+@njit(cache=True)
+def _fill_tangent_monomials(spec, s, work, o_box):
+    """The monomials continued from the nearest point of the box, into work
+    (the powers are those of that point)."""
+    n_vars, n_monomials, width, n_factors = spec[0], spec[1], spec[2], spec[3]
+    o_point = o_box + 2 * n_vars
+    for j in range(n_vars):
+        work[o_point + j] = min(max(s[j], work[o_box + j]), work[o_box + n_vars + j])
+    _fill_monomials(spec, work[o_point : o_point + n_vars], work)
+    o_values = n_vars * width
+    for k in range(n_monomials):
+        row = _HEADER + k * (n_factors + 1)
+        count = spec[row]
+        for f in range(count):
+            j, e = _factor(spec, width, row, f)
+            step = s[j] - work[o_point + j]
+            if step != 0.0:
+                slope = e * work[j * width + e - 1]
+                for g in range(count):
+                    if g != f:
+                        slope *= work[spec[row + 1 + g]]
+                work[o_values + k] += slope * step
+
+
+@njit(cache=True)
+def _add_tangent_curvature(spec, s, work, o_box):
+    """Add to the state derivatives of the continued monomials (computed at
+    the box's point) the change of the tangent plane with the unclipped
+    states."""
+    n_vars, n_monomials, width, n_factors, n_diff = (spec[0], spec[1], spec[2], spec[3],
+                                                     spec[4])
+    o_point = o_box + 2 * n_vars
+    o_out = n_vars * width + n_monomials
+    for k in range(n_monomials):
+        row = _HEADER + k * (n_factors + 1)
+        count = spec[row]
+        for f in range(count):
+            i, e_i = _factor(spec, width, row, f)
+            if i >= n_diff or s[i] != work[o_point + i]:
+                continue
+            acc = 0.0
+            for g in range(count):
+                j, e_j = _factor(spec, width, row, g)
+                step = s[j] - work[o_point + j]
+                if g == f or step == 0.0:
+                    continue
+                term = e_i * work[i * width + e_i - 1] * e_j * work[j * width + e_j - 1] * step
+                for q in range(count):
+                    if q != f and q != g:
+                        term *= work[spec[row + 1 + q]]
+                acc += term
+            work[o_out + k * n_diff + i] += acc
+
+
 @njit(EVALUATE, cache=True)
 def _evaluate(theta, spec, s, n, h, work):
     n_zeta, n_eta, o_zeta, o_eta, _, _, o_values, _ = _offsets(spec)
     _fill_monomials(spec, s, work)
+    o_box = _work_size(spec)
+    outside = not _inside(s, work, o_box)
+    work[o_box + 3 * s.shape[0]] = 1.0 if outside else 0.0
+    if outside:
+        _fill_tangent_monomials(spec, s, work, o_box)
     o_f = n * n_zeta
     for i in range(n):
         acc = 0.0
@@ -404,6 +495,9 @@ def _sparse_rows(theta, o_theta, n_columns, spec, o_positions, o_bounds, n, work
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
     n_zeta, n_eta, o_zeta, o_eta, o_zeta_bounds, o_eta_bounds, _, o_slopes = _offsets(spec)
     _fill_derivatives(spec, work)
+    o_box = _work_size(spec)
+    if work[o_box + 3 * s.shape[0]]:
+        _add_tangent_curvature(spec, s, work, o_box)
     _sparse_rows(theta, 0, n_zeta, spec, o_zeta, o_zeta_bounds, n, work, o_slopes, dh_dx, 0, n)
     _sparse_rows(theta, n * n_zeta, n_eta, spec, o_eta, o_eta_bounds, n, work, o_slopes,
                  dh_dx, n, dh_dx.shape[0] - n)
@@ -433,13 +527,22 @@ class PolynomialTerms(Terms):
         Dimensions.
     state_exponents, output_exponents : ndarray of int64
         Exponents of zeta and eta, shapes (n_zeta, n_vars) and (n_eta, n_vars).
+    input_range : ndarray of shape (2, n_vars), default=None
+        Lower and upper ends of the range of each variable of ``s = [x; u]``
+        inside which the monomials are themselves; beyond, they go on along
+        their tangent planes at the nearest point of that box. ``None``: the
+        monomials everywhere.
+    continued : bool, default=False
+        Keep the monomials beyond ``input_range`` too (the range is then only
+        a record of where the points went).
     """
 
     evaluate = staticmethod(_evaluate)
     state_jacobian = staticmethod(_state_jacobian)
     parameter_jacobian = staticmethod(_parameter_jacobian)
 
-    def __init__(self, n_states, n_outputs, state_exponents, output_exponents):
+    def __init__(self, n_states, n_outputs, state_exponents, output_exponents,
+                 input_range=None, continued=False):
         self.exponents = (np.ascontiguousarray(state_exponents, dtype=np.int64),
                           np.ascontiguousarray(output_exponents, dtype=np.int64))
         n_zeta, n_eta = (len(e) for e in self.exponents)
@@ -457,5 +560,30 @@ class PolynomialTerms(Terms):
         starts = len(monomials) + np.cumsum([0] + [len(t) for t in tables[:-1]])
         self.spec = np.concatenate([monomials, *tables, starts[[0, 1, 2, 4]],
                                     [n_zeta, n_eta]]).astype(np.int64)
-        self.work_size = _work_size(monomials)
+        # The box of the tangent continuation, its nearest point and the
+        # clipped flag end the work.
+        self.work_size = _work_size(monomials) + 3 * n_vars + 1
         self.n_state_params = n_states * n_zeta
+        self.dimensions = (n_states, n_outputs)
+        if input_range is None:
+            input_range = UNBOUNDED.repeat(n_vars, axis=1)
+        self.input_range = np.asarray(input_range, dtype=np.float64)
+        self.continued = continued
+
+    @property
+    def work_init(self):
+        """The work array with the box beyond which the monomials go on along
+        their tangent planes (unbounded when they are continued)."""
+        work = np.zeros(self.work_size)
+        n_vars = self.input_range.shape[1]
+        bounds = UNBOUNDED if self.continued else self.input_range
+        work[-3 * n_vars - 1 : -n_vars - 1] = np.broadcast_to(bounds, (2, n_vars)).ravel()
+        return work
+
+    def with_input_range(self, values, S, continued=False):
+        """The same terms with the box that the points ``S = [x; u]`` fill,
+        beyond which the monomials go on along their tangent planes, or as
+        themselves when ``continued`` (``values``, the parameter blocks, are
+        not needed: the box holds the points themselves)."""
+        return PolynomialTerms(*self.dimensions, *self.exponents,
+                               np.vstack([S.min(axis=0), S.max(axis=0)]), continued)
