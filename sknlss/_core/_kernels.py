@@ -22,8 +22,9 @@ terms object that owns them.
 
 **The terms contract.** With ``spec`` an integer array describing the terms'
 structure and ``work`` a work array that every kernel call starts as a copy
-of the terms' ``work_init`` (constants the terms read, such as the range of a
-branch input, then scratch space):
+of the terms' ``work_init`` (constants the terms read, such as the range of
+their inputs beyond which they go on along their tangents, then scratch
+space):
 
 - ``evaluate(theta_terms, spec, s, n_states, h, work)`` writes ``h(s)``;
 - ``state_jacobian(theta_terms, spec, s, n_states, dh_dx, work)`` writes the

@@ -25,12 +25,6 @@ def _contiguous(U, starts):
     return _array(U), _array(starts, np.int64)
 
 
-#: The range of a variable that no point leaves, shape (2, 1): terms that go
-#: on along their tangents beyond a range (the branches, the monomials) are
-#: themselves everywhere with it.
-UNBOUNDED = np.array([[-np.inf], [np.inf]])
-
-
 def parameter_count(blocks):
     """Number of parameters in blocks ``(name, shape)`` (exact for any size)."""
     return sum(math.prod(shape) for _, shape in blocks)
@@ -71,6 +65,41 @@ class Terms:
     def decay_mask(self):
         """Which of the terms' parameters the weight decay acts on (all by default)."""
         return np.ones(self.n_params, dtype=bool)
+
+
+#: The range of an input that no point leaves, shape (2, 1).
+_UNBOUNDED = np.array([[-np.inf], [np.inf]])
+
+
+class RangedTerms(Terms):
+    """Terms that go on along their tangents beyond a range of their inputs.
+
+    Subclasses call :meth:`_set_range` and set ``_range_offset``, the position
+    in the work array of the range's ``2 * n_ranged`` bounds (all lower ends,
+    then all upper ends).
+    """
+
+    _range_offset = 0
+
+    def _set_range(self, input_range, continued, n_ranged):
+        """``input_range`` of shape (2, n_ranged), ``None`` for no bound; with
+        ``continued`` the terms are themselves beyond it too (it is then only a
+        record of where their inputs went)."""
+        if input_range is None:
+            input_range = _UNBOUNDED.repeat(n_ranged, axis=1)
+        self.input_range = np.asarray(input_range, dtype=np.float64)
+        self.continued = continued
+
+    @property
+    def work_init(self):
+        """The work array with the range beyond which the terms go on along
+        their tangents (unbounded when they are continued)."""
+        work = np.zeros(self.work_size)
+        n_ranged = self.input_range.shape[1]
+        bounds = _UNBOUNDED if self.continued else self.input_range
+        start = self._range_offset
+        work[start : start + 2 * n_ranged] = np.broadcast_to(bounds, (2, n_ranged)).ravel()
+        return work
 
 
 def _pointers(terms):

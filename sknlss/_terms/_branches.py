@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
-from .._core._model import UNBOUNDED, Terms
+from .._core._model import RangedTerms
 from ._bases import basis_functions
 
 # spec = [rank, n_functions, basis code, degrees ...]
@@ -117,7 +117,7 @@ def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output
                   True)
 
 
-class BranchTerms(Terms):
+class BranchTerms(RangedTerms):
     """``h(s) = W f(V^T s)`` with ``rank`` univariate branches over ``basis``.
 
     Parameters
@@ -153,19 +153,8 @@ class BranchTerms(Terms):
         self.spec = np.concatenate([[rank, n_fun, basis.code], degrees]).astype(np.int64)
         self.work_size = 4 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
-        if input_range is None:
-            input_range = UNBOUNDED.repeat(rank, axis=1)
-        self.input_range = np.asarray(input_range, dtype=np.float64)
-        self.continued = continued
-
-    @property
-    def work_init(self):
-        """The work array with, at its head, the range beyond which the branches
-        go on along their tangents (unbounded when they are continued)."""
-        work = np.zeros(self.work_size)
-        bounds = UNBOUNDED if self.continued else self.input_range
-        work[: 2 * self.rank] = np.broadcast_to(bounds, (2, self.rank)).ravel()
-        return work
+        # The range of the branch inputs heads the work.
+        self._set_range(input_range, continued, rank)
 
     def with_input_range(self, values, S, continued=False):
         """The same terms with the range that the branch inputs ``V^T s`` take

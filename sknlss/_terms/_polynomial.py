@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
-from .._core._model import UNBOUNDED, Terms
+from .._core._model import RangedTerms
 
 #: Monomial selections understood by :func:`monomial_exponents`.
 STRUCTURES = ("full", "states_only", "no_cross_products", "inputs_only")
@@ -518,7 +518,7 @@ def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output
             output_out[i, o_f + i * n_eta + k] += work[o_values + spec[o_eta + k]]
 
 
-class PolynomialTerms(Terms):
+class PolynomialTerms(RangedTerms):
     """``h_x = E zeta(s)``, ``h_y = F eta(s)`` with monomials zeta and eta.
 
     Parameters
@@ -562,23 +562,11 @@ class PolynomialTerms(Terms):
                                     [n_zeta, n_eta]]).astype(np.int64)
         # The box of the tangent continuation, its nearest point and the
         # clipped flag end the work.
-        self.work_size = _work_size(monomials) + 3 * n_vars + 1
+        self._range_offset = _work_size(monomials)
+        self.work_size = self._range_offset + 3 * n_vars + 1
+        self._set_range(input_range, continued, n_vars)
         self.n_state_params = n_states * n_zeta
         self.dimensions = (n_states, n_outputs)
-        if input_range is None:
-            input_range = UNBOUNDED.repeat(n_vars, axis=1)
-        self.input_range = np.asarray(input_range, dtype=np.float64)
-        self.continued = continued
-
-    @property
-    def work_init(self):
-        """The work array with the box beyond which the monomials go on along
-        their tangent planes (unbounded when they are continued)."""
-        work = np.zeros(self.work_size)
-        n_vars = self.input_range.shape[1]
-        bounds = UNBOUNDED if self.continued else self.input_range
-        work[-3 * n_vars - 1 : -n_vars - 1] = np.broadcast_to(bounds, (2, n_vars)).ravel()
-        return work
 
     def with_input_range(self, values, S, continued=False):
         """The same terms with the box that the points ``S = [x; u]`` fill,
