@@ -7,7 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sknlss._core._model import StateSpaceModel
 from sknlss._terms._polynomial import (
+    PolynomialTerms,
     evaluate_monomials,
     monomial_exponents,
     monomial_jacobian,
@@ -134,9 +136,6 @@ def test_jacobian_finite_differences(structure):
 
 
 def test_terms_continue_along_tangent_planes_beyond_their_box():
-    from sknlss._core._model import StateSpaceModel
-    from sknlss._terms._polynomial import PolynomialTerms
-
     rng = np.random.default_rng(3)
     exponents = monomial_exponents(2, 1, (2, 3))
     box = np.array([[-0.2, -0.1, -0.5], [0.1, 0.3, 0.4]])

@@ -454,6 +454,9 @@ def _add_tangent_curvature(spec, s, work, o_box):
 @njit(EVALUATE, cache=True)
 def _evaluate(theta, spec, s, n, h, work):
     n_zeta, n_eta, o_zeta, o_eta, _, _, o_values, _ = _offsets(spec)
+    # Filled at s before the box is looked at, so that the path of the points
+    # inside (nearly all of them) is the code without a box; a point outside
+    # is filled again at the box's nearest point.
     _fill_monomials(spec, s, work)
     o_box = _work_size(spec)
     outside = not _inside(s, work, o_box)
