@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter, lfiltic
+from scipy.signal import butter, lfilter, lfiltic
 
 from sknlss._linear._frf import lpm_frf, lpm_window, robust_frf
 from sknlss.signals import multisine
@@ -137,6 +137,21 @@ def test_lpm_band_limited_input_keeps_excited_bins():
     assert k.max() <= lines.max() + 5  # the window half-width beyond the band
     est_cut = lpm_frf(u[:, None], y[:, None], np.array([0, 512]), max_frequency=0.05)
     assert est_cut.frequencies.max() <= 0.05
+
+
+def test_lpm_power_threshold_keeps_the_strongest_windows():
+    """A band-limited random input leaks power beyond its band: a higher
+    threshold keeps a subset of the bins, with the same estimates there."""
+    rng = np.random.default_rng(0)
+    u = lfilter(*butter(6, 0.1), rng.standard_normal(2048))
+    y = lfilter(NUM, DEN, u)
+    starts = np.array([0, u.size])
+    loose = lpm_frf(u[:, None], y[:, None], starts, power_threshold=1e-3)
+    strict = lpm_frf(u[:, None], y[:, None], starts, power_threshold=1e-2)
+    assert strict.frequencies.size < loose.frequencies.size
+    common = np.isin(loose.frequencies, strict.frequencies)
+    assert common.sum() == strict.frequencies.size
+    np.testing.assert_array_equal(loose.frf[common], strict.frf)
 
 
 def test_lpm_combines_records_at_equal_frequencies():

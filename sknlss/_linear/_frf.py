@@ -217,7 +217,7 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
     return n_bins, 0
 
 
-def _lpm_record(U, Y, order, bandwidth, max_frequency):
+def _lpm_record(U, Y, order, bandwidth, max_frequency, power_threshold):
     """LPM on one record: (frequencies, FRF, variance or None)."""
     n, n_u = U.shape
     n_bins = (n - 1) // 2  # positive bins below Nyquist
@@ -255,11 +255,12 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     window_power = np.sum(np.abs(Uw) ** 2, axis=(1, 2))
     bins = np.arange(1, n_bins + 1)
     keep = _band_mask(bins, n, max_frequency)
-    keep &= window_power > LPM_POWER_THRESHOLD * window_power[keep].max(initial=0.0)
+    keep &= window_power > power_threshold * window_power[keep].max(initial=0.0)
     return bins[keep] / n, G[keep], None if var is None else var[keep]
 
 
-def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
+def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None,
+            power_threshold=LPM_POWER_THRESHOLD):
     """Local Polynomial Method FRF of non-periodic records.
 
     Parameters
@@ -280,12 +281,15 @@ def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequen
         Samples dropped at the start of every record.
     max_frequency : float, default=None
         Highest frequency used, in cycles per sample.
+    power_threshold : float, default=LPM_POWER_THRESHOLD
+        Input power of a bin's window, relative to the largest window's, below
+        which the bin is left out.
 
     Returns
     -------
     estimate : FRFEstimate
         On the bins below ``max_frequency`` whose window holds input power
-        (at least ``LPM_POWER_THRESHOLD`` times the largest window power).
+        (at least ``power_threshold`` times the largest window power).
         The LPM cannot separate noise from nonlinear distortion on a
         non-periodic record: both variances are the same total variance.
         Records of different lengths contribute their own bins; estimates at
@@ -293,7 +297,7 @@ def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequen
     """
     parts = [
         _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
-                    bandwidth, max_frequency)
+                    bandwidth, max_frequency, power_threshold)
         for begin, end in zip(starts[:-1], starts[1:])
     ]
     freqs = np.concatenate([p[0] for p in parts])
