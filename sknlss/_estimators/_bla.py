@@ -38,6 +38,8 @@ _RELATIVE_VARIANCE_FLOOR = 1e-12
 # machine precision is rounding, not noise. Without this floor, a record with
 # (nearly) no linear response gives weights beyond 1e150 whose squares overflow.
 _ABSOLUTE_VARIANCE_FLOOR = np.finfo(float).eps ** 2
+# Normalised RMS error of a simulation as poor as the output's mean.
+_MEAN_LEVEL = 1.0
 # Relative window power of the LPM's second attempt when its first model
 # simulates the estimation record worse than the output's mean.
 _STRICT_POWER_THRESHOLD = 1e-2
@@ -160,7 +162,7 @@ def _fit_linear_model(U, Y, starts, params):
         return fit
     mask = transient_mask(starts, params["n_transient"])
     error = _simulation_nrmse(fit, U, Y, starts, mask)
-    if error <= 1.0:
+    if error <= _MEAN_LEVEL:
         return fit
     # A model worse than the output's mean is pulled by a few far-off lines,
     # typically the leakage of a band-limited input just above its band edge
@@ -514,7 +516,7 @@ class BLAEstimator(_BaseStateSpace):
         """Warn when the model simulates its own estimation record worse than the
         output's mean: such a model should not be taken silently."""
         error = _simulation_nrmse(fit, U, Y, starts, transient_mask(starts, self.n_transient))
-        if error <= 1.0:
+        if error <= _MEAN_LEVEL:
             return
         remedy = "a max_frequency below the edge of the excited band"
         if _frf_method(params) == "lpm" and self.lpm_order > 0:
