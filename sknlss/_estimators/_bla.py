@@ -79,6 +79,11 @@ class LinearFit:
         The nonparametric estimate and the model's FRF at its frequencies.
     n_iter : int
     loss_history : ndarray or None
+    simulation_error : float
+        Largest normalised RMS error over the outputs of the model's
+        simulation of its estimation rows, from the least-squares initial
+        state (inf for a diverging simulation); above ``_MEAN_LEVEL`` the
+        model is worse than the output's mean.
     """
 
     A: np.ndarray
@@ -95,6 +100,7 @@ class LinearFit:
     frf_model: np.ndarray
     n_iter: int
     loss_history: np.ndarray | None
+    simulation_error: float
 
 
 def _frf_method(params):
@@ -157,12 +163,9 @@ def fit_linear_model(U, Y, starts, params):
 
 
 def _fit_linear_model(U, Y, starts, params):
-    fit = _parametric(_nonparametric(U, Y, starts, params), U, Y, starts, params)
-    if _frf_method(params) != "lpm":
-        return fit
     mask = transient_mask(starts, params["n_transient"])
-    error = _simulation_nrmse(fit, U, Y, starts, mask)
-    if error <= _MEAN_LEVEL:
+    fit = _parametric(_nonparametric(U, Y, starts, params), U, Y, starts, mask, params)
+    if _frf_method(params) != "lpm" or fit.simulation_error <= _MEAN_LEVEL:
         return fit
     # A model worse than the output's mean is pulled by a few far-off lines,
     # typically the leakage of a band-limited input just above its band edge
@@ -171,14 +174,15 @@ def _fit_linear_model(U, Y, starts, params):
     # removes them; the model that simulates the estimation rows better wins.
     try:
         strict = _parametric(_nonparametric(U, Y, starts, params, _STRICT_POWER_THRESHOLD),
-                             U, Y, starts, params)
+                             U, Y, starts, mask, params)
     except (ValueError, np.linalg.LinAlgError):
         return fit
-    return strict if _simulation_nrmse(strict, U, Y, starts, mask) < error else fit
+    return strict if strict.simulation_error < fit.simulation_error else fit
 
 
-def _parametric(estimate, U, Y, starts, params):
-    """Balanced state-space model fitted to the nonparametric ``estimate``."""
+def _parametric(estimate, U, Y, starts, mask, params):
+    """Balanced state-space model fitted to the nonparametric ``estimate``,
+    checked on the estimation rows ``mask``."""
     n, n_u, n_y = params["n_states"], U.shape[1], Y.shape[1]
     n_freq = estimate.frequencies.size
     n_free = n * (n_u + n_y) + n_y * n_u
@@ -199,21 +203,22 @@ def _parametric(estimate, U, Y, starts, params):
                                         verbose=params["verbose"])
         n_iter, loss_history = result.n_iter, result.loss_history
     A, B, C, D, hsv = balanced_realization(A, B, C, D)
-    x0, output_offset = np.zeros(n), np.zeros(n_y)
-    if params["estimate_x0"]:
-        mask = transient_mask(starts, params["n_transient"])
-        x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask)
+    # The least-squares initial state checks every model; the fit keeps it
+    # only with estimate_x0.
+    x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask)
+    error = _simulation_nrmse(A, B, C, D, U, Y, starts, mask, x0, output_offset)
+    if not params["estimate_x0"]:
+        x0, output_offset = np.zeros(n), np.zeros(n_y)
     return LinearFit(A, B, C, D, x0, output_offset, hsv, freqs, G, estimate.noise_variance,
                      estimate.total_variance, ss_frf(A, B, C, D, freqs), n_iter,
-                     loss_history)
+                     loss_history, error)
 
 
-def _simulation_nrmse(fit, U, Y, starts, mask):
+def _simulation_nrmse(A, B, C, D, U, Y, starts, mask, x0, offset):
     """Largest RMS error over the outputs, relative to each output's standard
-    deviation, of the model's simulation over the rows ``mask`` from its
-    least-squares initial state; inf for a diverging simulation."""
-    x0, offset = estimate_initial_state(fit.A, fit.B, fit.C, fit.D, U, Y, starts, mask)
-    Y_sim, _, diverged = simulate_linear(fit.A, fit.B, fit.C, fit.D, U, starts,
+    deviation, of the model's simulation over the rows ``mask`` from ``x0``
+    with the output ``offset``; inf for a diverging simulation."""
+    Y_sim, _, diverged = simulate_linear(A, B, C, D, U, starts,
                                          np.tile(x0, (len(starts) - 1, 1)))
     if diverged:
         return np.inf
@@ -510,12 +515,12 @@ class BLAEstimator(_BaseStateSpace):
         params = self.get_params()
         fit = fit_linear_model(U, Y, starts, params)
         _set_fitted(self, fit, normalisation_of(self))
-        self._warn_if_worse_than_the_mean(fit, U, Y, starts, params)
+        self._warn_if_worse_than_the_mean(fit, params)
 
-    def _warn_if_worse_than_the_mean(self, fit, U, Y, starts, params):
+    def _warn_if_worse_than_the_mean(self, fit, params):
         """Warn when the model simulates its own estimation record worse than the
         output's mean: such a model should not be taken silently."""
-        error = _simulation_nrmse(fit, U, Y, starts, transient_mask(starts, self.n_transient))
+        error = fit.simulation_error
         if error <= _MEAN_LEVEL:
             return
         remedy = "a max_frequency below the edge of the excited band"
