@@ -69,6 +69,8 @@ class _Basis:
     """Common behaviour of the bases: parameters, evaluation, comparison."""
 
     code = _POWERS
+    #: The constructor's parameters, in its order.
+    _param_names = ("degree", "constant")
 
     def __init__(self, degree=3, *, constant=False):
         self.degree = degree
@@ -132,7 +134,7 @@ class _Basis:
         -------
         params : dict
         """
-        return {"degree": self.degree, "constant": self.constant}
+        return {name: getattr(self, name) for name in self._param_names}
 
     def __repr__(self):
         params = ", ".join(f"{key}={value!r}" for key, value in self.get_params().items())
@@ -171,6 +173,7 @@ class PolynomialBasis(_Basis):
     """
 
     code = _POWERS
+    _param_names = ("degree", "kind", "constant")
 
     def __init__(self, degree=3, *, kind="full", constant=False):
         self.degree = degree
@@ -190,20 +193,6 @@ class PolynomialBasis(_Basis):
                 f"PolynomialBasis: kind='odd' needs degree >= 3, got {self.degree!r}."
             )
         return degrees
-
-    def get_params(self, deep=True):
-        """Constructor parameters, for display and comparison.
-
-        Parameters
-        ----------
-        deep : bool, default=True
-            Unused: a basis holds no estimator.
-
-        Returns
-        -------
-        params : dict
-        """
-        return {"degree": self.degree, "kind": self.kind, "constant": self.constant}
 
 
 class LegendreBasis(_Basis):
