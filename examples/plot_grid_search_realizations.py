@@ -14,7 +14,6 @@ The data come from the reference PNLSS system of the PNLSS toolbox tutorial:
 realizations 0-2 serve the search, realization 3 is the test.
 """
 
-import numpy as np
 import sklearn
 from sklearn.model_selection import GridSearchCV, LeaveOneGroupOut
 

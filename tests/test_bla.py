@@ -7,7 +7,6 @@ import warnings
 import numpy as np
 import pytest
 from scipy.signal import lfilter, lfiltic
-from sklearn.base import clone
 from sklearn.datasets import load_iris
 
 from sknlss import BLAEstimator

@@ -4,6 +4,7 @@ import warnings
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
@@ -155,6 +156,26 @@ def test_options_x0_validation_and_trajectory_sampling(wiener_data):
     assert model.x0_.shape == (2,)
     assert model.n_params_ == 4 + 2 + 2 + 1 + (3 + 3 + 2) * 2 + 2
     assert model.score(u, y) > 0.99
+
+
+def test_the_model_to_beat_and_to_fall_back_on_is_the_bla():
+    # Noisy data of a linear system: without re-optimisation (max_iter=0) the
+    # decoupled starts do worse than the BLA on the held-out end at this seed.
+    rng = np.random.default_rng(0)
+    u = 0.3 * rng.standard_normal((400, 1))
+    y = lfilter([0.0, 1.0], [1.0, -1.5, 0.7], u[:, 0]) + 0.05 * rng.standard_normal(400)
+    model = DecoupledPNLSS(n_states=2, rank=1, estimate_x0=True, validation_fraction=0.25,
+                           pnlss=PNLSSRegressor(degree=(2, 3), max_iter=10), max_iter=0,
+                           n_restarts=2, n_init=2, random_state=2).fit(u, y)
+    # Both fits hold out the same end, on which the PNLSS fit judged the same BLA.
+    assert not model.pnlss_.fell_back_to_linear_
+    assert model.linear_loss_ == pytest.approx(model.pnlss_.linear_loss_, rel=1e-12)
+    assert model.fell_back_to_linear_
+    assert np.all(model.branch_coefficients_ == 0)
+    # The BLA's dynamics from its initial state; the BLA also fits an output
+    # offset with that state, which the state-space model has no term for.
+    offset = model.y_scale_ * model.bla_.output_offset_
+    np.testing.assert_allclose(model.predict(u) + offset, model.bla_.predict(u), atol=1e-12)
 
 
 def test_pnlss_hyperparameters_are_nested():

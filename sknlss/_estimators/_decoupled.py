@@ -20,7 +20,7 @@ from .._terms._branches import BranchTerms
 from .._terms._cpd import decouple_polynomial
 from .._validation import Integers
 from ._base import _unfitted_on_error
-from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
+from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms, with_linear_part
 from ._pnlss import PNLSSRegressor
 
 # Factors applied to W when the decoupled initial model diverges on the
@@ -181,8 +181,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Number of starts: decouplings with independent random sampling points
         and CPD initialisations, each followed by the re-optimisation; the
         PNLSS model is fitted once. The start with the lowest simulation error
-        on the held-out end is kept, unless the PNLSS model's linear part does
-        better there (it is then kept instead, see ``fell_back_to_linear_``).
+        on the held-out end is kept, unless the BLA (``bla_``, the linear model
+        the PNLSS fit started from) does better there (it is then kept
+        instead, see ``fell_back_to_linear_``).
     n_jobs : int or None, default=None
         Number of joblib workers for the starts (of the PNLSS model too).
     random_state : int, RandomState instance or None, default=None
@@ -217,8 +218,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     pnlss_ : PNLSSRegressor
         The fitted PNLSS model that was decoupled.
     bla_ : BLAEstimator
-        The fitted linear model of the PNLSS model's initialisation; it
-        predicts and reports its FRF in the user's units.
+        The fitted linear model of the PNLSS model's initialisation, which
+        the decoupled model must beat on the held-out end; it predicts and
+        reports its FRF in the user's units.
     branch_degree_ : int
         Degree of the branches used.
     decoupling_error_ : float
@@ -250,7 +252,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         :class:`~sknlss.LinearFallbackWarning`): the linear model is kept (its
         nonlinear terms are zero).
     linear_loss_ : float
-        Mean squared simulation error of the linear start on that end.
+        Mean squared simulation error of the BLA on that end.
     refit_n_iter_ : int
         Iterations of the refit on all the rows that were kept (0 without one).
     fit_transient_ : int
@@ -435,6 +437,14 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         pnlss = self.pnlss_
         self.bla_ = pnlss.bla_
         return pnlss.A_, pnlss.B_, pnlss.C_, pnlss.D_, pnlss.x0_
+
+    def _linear_model(self, model, theta):
+        # The starts begin at the PNLSS model's linear part, whose polynomials
+        # are written in its states; without them that linear part need not
+        # even be stable. The model to beat is the BLA the PNLSS started from.
+        bla = self.bla_
+        return with_linear_part(model, {"A": bla.A_, "B": bla.B_, "C": bla.C_, "D": bla.D_,
+                                         "x0": bla.x0_})
 
     def _prepare_starts(self, context):
         pnlss, starts, rows = self.pnlss_, context["starts"], context["rows"]

@@ -206,6 +206,14 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # start the nonlinear search far away.
         return self._fit_linear_part(problem, theta)[0]
 
+    def _linear_model(self, model, theta):
+        """The parameters, in ``model``'s layout, of the linear model that the
+        kept start must beat on the held-out end and that is kept otherwise
+        (refined on the simulation error when the record is too short for the
+        terms): the linear start ``theta`` (the BLA, refined with
+        ``refine_linear``)."""
+        return theta
+
     def _record_start(self, context, start, seed):
         """Record what the kept start's initialisation found (nothing by default)."""
 
@@ -339,7 +347,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         theta = model.pack(values)
         self.refit_n_iter_ = 0
         if self._underdetermined(problem):
-            theta_best, result = self._fit_linear_part(problem, theta)
+            theta_best, result = self._fit_linear_part(problem, self._linear_model(model, theta))
             # No start could be made: each counts as left out.
             self.start_losses_ = np.full(self.n_init, np.inf)
             self.linear_loss_ = holdout_loss(problem_sets[0][min(shares)], theta_best)
@@ -379,7 +387,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         for problems in problem_sets:
             problem = problems[max(shares)]
             context = {"problem": problem, "model": problem.model,
-                       "theta": _with_linear_part(problem.model, linear), "U": U, "Y": Y,
+                       "theta": with_linear_part(problem.model, linear), "U": U, "Y": Y,
                        "starts": starts, "rows": problem.rows, "seeds": seeds}
             self._prepare_starts(context)
             contexts.append(context)
@@ -410,6 +418,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         theta_best, result, start_warnings = outcomes[best]
         c_best, j_best, _, seed_best = runs[best]
         self.start_losses_ = np.asarray(losses)
+        theta = self._linear_model(contexts[0]["model"], theta)
         linear_loss = holdout_loss(common[0], theta)
         # A nonlinear model that does worse than its linear start there is not
         # returned: the linear model is, and the attribute records it.
@@ -490,7 +499,7 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
     return theta, result, [(warning.message, warning.category) for warning in caught]
 
 
-def _with_linear_part(model, linear):
+def with_linear_part(model, linear):
     """The parameters of ``model`` with the linear part (and x0) of the unpacked
     ``linear`` and its terms switched off."""
     values = {name: np.zeros(shape) for name, shape in model.blocks}
