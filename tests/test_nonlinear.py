@@ -165,6 +165,18 @@ def test_refit_needs_a_held_out_end(name, record):
     np.testing.assert_array_equal(models[0].predict(u), models[1].predict(u))
 
 
+@pytest.mark.parametrize("radius, skipped", [(0.0, 0), (0.5, 7), (0.99, 100), (1.0, 100),
+                                             (1.2, 100)])
+def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
+    # log(0.01) / log(0.5) = 6.6 samples; at most a tenth of the 1000-sample
+    # record, which is also what a mode that does not decay takes.
+    starts = np.array([0, 1000])
+    A = np.diag([radius, 0.0])
+    assert PNLSSRegressor(2)._cost_transient(A, starts) == skipped
+    assert PNLSSRegressor(2, n_transient=200)._cost_transient(A, starts) == 200
+    assert PNLSSRegressor(2, estimate_x0=True)._cost_transient(A, starts) == 0
+
+
 def test_fallback_to_the_linear_model_is_reported(record):
     u, y = record
     # Without iterations the start stays at its starting point, the linear

@@ -242,8 +242,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if self.estimate_x0 or self.period is not None:
             return self.n_transient
         radius = np.max(np.abs(np.linalg.eigvals(A)), initial=0.0)
-        settling = 0 if radius <= 0 else int(np.ceil(np.log(_SETTLED) / np.log(radius)))
         limit = int(_MAX_TRANSIENT_SHARE * np.min(np.diff(starts)))
+        if radius >= 1.0:
+            # A mode that does not decay never settles (the decoupled model
+            # starts from a PNLSS model's linear part, which may grow).
+            settling = limit
+        else:
+            settling = 0 if radius <= 0 else int(np.ceil(np.log(_SETTLED) / np.log(radius)))
         return max(self.n_transient, min(settling, limit))
 
     def _structure(self):
