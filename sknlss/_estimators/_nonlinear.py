@@ -247,8 +247,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             # A mode that does not decay never settles (the decoupled model
             # starts from a PNLSS model's linear part, which may grow).
             settling = limit
+        elif radius > 0.0:
+            settling = int(np.ceil(np.log(_SETTLED) / np.log(radius)))
         else:
-            settling = 0 if radius <= 0 else int(np.ceil(np.log(_SETTLED) / np.log(radius)))
+            settling = 0
         return max(self.n_transient, min(settling, limit))
 
     def _structure(self):
@@ -423,9 +425,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         theta_best, result, start_warnings = outcomes[best]
         c_best, j_best, _, seed_best = runs[best]
         self.start_losses_ = np.asarray(losses)
-        theta = self._linear_model(contexts[0]["model"], theta)
-        linear_loss = holdout_loss(common[0], theta)
-        # A nonlinear model that does worse than its linear start there is not
+        linear_theta = self._linear_model(contexts[0]["model"], theta)
+        linear_loss = holdout_loss(common[0], linear_theta)
+        # A nonlinear model that does worse than the linear model there is not
         # returned: the linear model is, and the attribute records it.
         self.linear_loss_ = linear_loss
         self.fell_back_to_linear_ = not losses[best] < linear_loss
@@ -434,7 +436,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                 print(f"{self._label}: no start beat the linear model on the held-out "
                       f"data ({losses[best]:.3g} against {linear_loss:.3g}); the linear "
                       "model is kept.")
-            return contexts[0]["model"], theta, result
+            return contexts[0]["model"], linear_theta, result
         for message, category in start_warnings:
             # Pointing at the caller of fit: _search, _fit_normalized, fit
             # and its guard lie in between.
