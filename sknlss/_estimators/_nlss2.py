@@ -256,9 +256,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         State-estimation weight used.
     alpha_losses_ : ndarray of shape (len(ALPHA_GRID),)
         Selection losses of the candidates, when ``alpha="auto"``.
-    states_init_ : ndarray of shape (n_fitted_rows, n_states)
-        States estimated from the linear model on the fitted rows (of the
-        kept start's initialisation). ``alpha_``, ``alpha_losses_`` and
+    states_init_ : ndarray of shape (n_rows_before_holdout, n_states)
+        States estimated from the linear model on each sequence up to its
+        held-out end (the cost transient included), from which the networks
+        are initialised. ``alpha_``, ``alpha_losses_`` and
         ``states_init_`` belong to the networks' initialisation: they are not
         set when the record is too short for the networks and the linear
         model is kept without any start.

@@ -49,9 +49,10 @@ _ALS_TOL = 1e-10
 _SCREEN_POINTS = 50
 _SCREEN_MAX_ITER = 10
 _REFINE_MAX_ITER = 100
-# The final refinement uses at most this many tensor entries (a random subset
-# of the points): enough to determine the few parameters of V, W and the
-# branches, while the cost of a Gauss-Newton step grows with the entries.
+# The final refinement uses the points of a random subset that hold this many
+# tensor entries (at least _SCREEN_POINTS points): enough to determine the few
+# parameters of V, W and the branches, while the cost of a Gauss-Newton step
+# grows with the entries.
 _REFINE_MAX_ENTRIES = 4000
 
 
@@ -262,8 +263,9 @@ def decouple_polynomial(
     refine : bool, default=True
         Refine the CPD with its third factor constrained to the branch
         derivatives (Levenberg-Marquardt on V, W and the branch coefficients,
-        on a random subset of at most 4000 tensor entries), which makes the
-        decoupling exact to machine precision when ``f`` has an exact
+        on a random subset of the points: as many as hold 4000 tensor entries,
+        and at least 50), which makes the decoupling exact to machine
+        precision when ``f`` has an exact
         decoupled form. ``False`` keeps the plain CPD followed by the
         least-squares fit of the branch derivatives.
     zeroth_order : bool, default=True

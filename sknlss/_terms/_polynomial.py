@@ -135,7 +135,7 @@ def monomial_exponents(n_states, n_inputs, degree, structure="full"):
 
     Examples
     --------
-    >>> from sknlss._polynomial import monomial_exponents
+    >>> from sknlss._terms._polynomial import monomial_exponents
     >>> monomial_exponents(1, 1, 2)
     array([[2, 0],
            [1, 1],

@@ -8,11 +8,10 @@ fetch_cascaded_tanks
 fetch_silverbox
     The Silverbox records: estimation and three test records.
 
-Simulated systems (each with estimation and test records, a stated noise
-level and a test input that leaves the estimation amplitude):
+Simulated systems (each with estimation and test records that start
+mid-motion, a stated noise level and a test input that leaves the estimation
+amplitude):
 
-make_cascaded_tanks
-    The two-tank system, with overflow and noise.
 make_wiener_hammerstein
     Linear filter, soft saturation, linear filter.
 make_duffing
@@ -21,6 +20,13 @@ make_bouc_wen
     The hysteretic Bouc-Wen oscillator of the Noël-Schoukens benchmark.
 make_closed_loop_drive
     A positioning drive with friction under PID control, in closed loop.
+
+Stand-ins of the other benchmarks:
+
+make_cascaded_tanks
+    The two-tank system, with overflow and noise; like the measured
+    benchmark, both records start from the same levels and the test input
+    has the estimation input's amplitude.
 make_pnlss_reference
     Steady-state multisine data of the reference PNLSS system.
 """

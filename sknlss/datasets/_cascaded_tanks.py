@@ -75,7 +75,8 @@ Simulated Cascaded Tanks
 
 dx1/dt = -k1 sqrt(x1) + k4 u + w1,  dx2/dt = k2 sqrt(x1) - k3 sqrt(x2) + w2,
 y = x2 + e, with (k1, k2, k3, k4) = {k}; the tanks overflow at {overflow}
-(hard saturation), a random part (mean {fraction}) of the upper tank's overflow
+(hard saturation), a part of the upper tank's overflow (with process noise
+drawn uniform on [0, 2 x {fraction}] and capped at 1, else {fraction})
 falling into the lower one. Process noise: level change of standard deviation
 {process} V per sample; measurement noise e: white Gaussian, standard deviation
 {measurement} V. Fourth-order Runge-Kutta, {n_substeps} steps per sample,
@@ -325,7 +326,8 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
     capped at 1, drawn for each sample, an input-dependent process noise) falls
     into the lower tank, the rest is lost. Without process noise the part is
     exactly ``overflow_fraction``. The defaults give records that resemble the
-    measured benchmark (output between about 3 and 10 V, some overflow).
+    measured benchmark (output mostly between about 2.5 and 10 V, with dips
+    to about 1 V, and some overflow).
 
     An estimation and a test record are simulated from the same initial
     state, as in the real benchmark.
@@ -350,7 +352,10 @@ def make_cascaded_tanks(n_samples=1024, *, input=None, sampling_time=4.0,
     overflow : tuple of two float, default=(10.0, 10.0)
         Overflow levels of the upper and lower tank (hard saturation).
     overflow_fraction : float, default=0.5
-        Mean fraction of the upper tank's overflow that reaches the lower tank.
+        Fraction of the upper tank's overflow that reaches the lower tank:
+        with process noise, the centre of its uniform draw on
+        ``[0, 2 * overflow_fraction]`` capped at 1 (its mean for values up to
+        0.5).
     k : tuple of four float, default=(0.05, 0.05, 0.05, 0.042)
         The constants k1, k2, k3, k4.
     x0 : array-like of shape (2,), default=None

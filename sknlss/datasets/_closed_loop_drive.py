@@ -213,7 +213,7 @@ def make_closed_loop_drive(n_samples=6000, n_test_samples=3000, *, reference_rms
             Samples at the start of the test record that may be used to set
             the initial state (50).
         excited_band : tuple of float
-            Lower and upper edge (Hz) of the reference's random motion, (0, 2);
+            Lower and upper edge (Hz) of the reference's random motion, (0, 5);
             the drift lies below it.
         DESCR : str
             Equations, parameter values, references and noise.
