@@ -1,5 +1,6 @@
 """Every public docstring documents exactly the parameters of its signature, in
-order, and its Examples run and print what they show."""
+order, and the Examples of every docstring of the package, private ones
+included, run and print what they show."""
 
 import doctest
 import importlib
@@ -126,13 +127,26 @@ def test_parameters_section_matches_signature(qualified, obj):
     )
 
 
+def _package_modules():
+    """Every module of the package, private ones included (their folders are
+    namespace packages, which ``pkgutil`` does not walk)."""
+    root = Path(importlib.import_module("sknlss").__file__).parent
+    for path in sorted(root.rglob("*.py")):
+        parts = path.relative_to(root.parent).with_suffix("").parts
+        if parts[-1] == "__main__":
+            continue
+        yield importlib.import_module(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+
+
 def _example_tests():
-    """The doctests of the public objects' docstrings, each found once."""
-    finder, found = doctest.DocTestFinder(recurse=False), {}
-    for qualified, obj in OBJECTS:
-        for test in finder.find(obj, qualified, globs={}):
-            if test.examples and test.lineno is not None:
-                found.setdefault((test.filename, test.lineno), test)
+    """The doctests of every docstring of the package, private ones included,
+    each found once (in the module that defines it)."""
+    finder, found = doctest.DocTestFinder(), {}
+    for module in _package_modules():
+        for test in finder.find(module, module.__name__, globs={}):
+            # The docstrings of decorated functions have no line number.
+            if test.examples and test.filename == module.__file__:
+                found.setdefault((test.filename, test.lineno or test.name), test)
     return sorted(found.values(), key=lambda test: test.name)
 
 
@@ -141,8 +155,9 @@ EXAMPLES = _example_tests()
 
 def test_examples_are_found():
     names = {test.name for test in EXAMPLES}
-    assert {"sknlss.PNLSSRegressor", "sknlss.NLLFRRegressor",
-            "sknlss.decouple_polynomial"} <= names
+    assert {"sknlss._estimators._pnlss.PNLSSRegressor",
+            "sknlss._estimators._nllfr.NLLFRRegressor",
+            "sknlss._terms._polynomial.monomial_exponents"} <= names
 
 
 @pytest.mark.parametrize("test", EXAMPLES, ids=[test.name for test in EXAMPLES])

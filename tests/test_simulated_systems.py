@@ -56,6 +56,17 @@ def test_records_and_fields(make):
 
 
 @pytest.mark.parametrize("make", GENERATORS, ids=_ids(GENERATORS))
+def test_the_estimation_input_lies_in_the_excited_band(make):
+    data = make(random_state=0)
+    u = data.X_est[:, 0] - data.X_est[:, 0].mean()
+    frequencies = np.fft.rfftfreq(u.size, data.sampling_time)
+    power = np.abs(np.fft.rfft(u)) ** 2
+    # The drive's band-limited noise has a short roll-off beyond its edge.
+    above = frequencies > 1.05 * data.excited_band[1]
+    assert power[above].sum() < 0.01 * power.sum()
+
+
+@pytest.mark.parametrize("make", GENERATORS, ids=_ids(GENERATORS))
 def test_deterministic_per_random_state(make):
     first, again, other = (make(**SMALL, random_state=seed) for seed in (4, 4, 5))
     for key in ("X_est", "y_est", "X_test", "y_test"):
