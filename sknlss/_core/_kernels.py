@@ -301,7 +301,10 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, 
     J = np.zeros((n_rows, n_y, n_params))
     local = np.empty((n_rows if with_local else 0, n, n))
     unused_rows = np.zeros((n_y, n_params))
-    # As in simulate, s = [x; u] holds the current state.
+    # As in simulate, s = [x; u] holds the current state, and the step is
+    # written out as there: the same step as a shared compiled helper (inlined
+    # or not) measured 12 % slower in simulate and 6 % here, bit for bit the
+    # same results.
     s = np.empty(n + n_u)
     h = np.empty(n + n_y)
     work = work_init.copy()
