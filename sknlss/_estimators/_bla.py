@@ -12,6 +12,7 @@ from numbers import Real
 
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
 from .._core._model import StateSpaceModel
@@ -40,8 +41,7 @@ _RELATIVE_VARIANCE_FLOOR = 1e-12
 _ABSOLUTE_VARIANCE_FLOOR = np.finfo(float).eps ** 2
 # Normalised RMS error of a simulation as poor as the output's mean.
 _MEAN_LEVEL = 1.0
-# Relative window power of the LPM's second attempt when its first model
-# simulates the estimation record worse than the output's mean.
+# Relative window power of the LPM's second model (see _fit_linear_model).
 _STRICT_POWER_THRESHOLD = 1e-2
 
 
@@ -165,13 +165,14 @@ def fit_linear_model(U, Y, starts, params):
 def _fit_linear_model(U, Y, starts, params):
     mask = transient_mask(starts, params["n_transient"])
     fit = _parametric(_nonparametric(U, Y, starts, params), U, Y, starts, mask, params)
-    if _frf_method(params) != "lpm" or fit.simulation_error <= _MEAN_LEVEL:
+    if _frf_method(params) != "lpm":
         return fit
-    # A model worse than the output's mean is pulled by a few far-off lines,
-    # typically the leakage of a band-limited input just above its band edge
-    # (closed-loop records, slow drifts): the LPM's windows there hold input
-    # power above the default threshold. Keeping only the strongest windows
-    # removes them; the model that simulates the estimation rows better wins.
+    # A few far-off lines can pull the model away, typically the leakage of
+    # an input that is not periodic in the record just above its band edge (a
+    # cut multisine, a band-limited reference with a slow drift): the LPM's
+    # windows there hold input power above the default threshold. Keeping only
+    # the strongest windows removes them, but can also drop lines the model
+    # needs; the model that simulates the estimation rows better wins.
     try:
         strict = _parametric(_nonparametric(U, Y, starts, params, _STRICT_POWER_THRESHOLD),
                              U, Y, starts, mask, params)
@@ -405,15 +406,15 @@ class BLAEstimator(_BaseStateSpace):
     treats each sequence as one record; estimates of several records at the
     same frequencies are averaged with inverse-variance weights.
 
-    The fit checks its LPM model in the time domain. When the model simulates
-    its estimation record worse than the output's mean (from the
-    least-squares initial state), a few lines far from the rest usually pull
-    it: the leakage of a band-limited input just above its band edge (a slow
-    drift of the reference, closed-loop records) leaves windows there with
-    more than 1e-3 of the largest input power. The LPM is then repeated on
-    the windows with at least 1e-2 of it, and the model that simulates the
-    estimation record better is kept; if that is still worse than the mean,
-    the fit warns.
+    The LPM model is checked in the time domain. The LPM keeps the bins
+    whose window holds at least 1e-3 of the largest window's input power; a
+    few lines far from the rest can pull the model away: the leakage of an
+    input that is not periodic in the record just above its band edge (a cut
+    multisine, a slow drift of a reference in closed loop). So the LPM is
+    also run on the windows with at least 1e-2 of it, which leaves those lines
+    out, and of the two models the one that simulates the estimation record
+    better (from the least-squares initial state) is kept. A model that is
+    still worse than the output's mean warns.
 
     The parametric step minimises the weighted FRF error of paper eq. 9 over
     the state-space matrices rather than over the coefficients of a rational
@@ -542,5 +543,6 @@ class BLAEstimator(_BaseStateSpace):
     @property
     def poles_(self):
         """Discrete-time poles (eigenvalues of ``A_``), by decreasing magnitude."""
+        check_is_fitted(self)
         poles = np.linalg.eigvals(self.A_)
         return poles[np.argsort(-np.abs(poles), kind="stable")]
