@@ -25,6 +25,7 @@ the same kind is used instead, and said so.
 """
 
 import math
+import numbers
 import os
 import sys
 import time
@@ -220,7 +221,7 @@ def _fit_and_score(factory, seed, data, records, scale):
         # A reproduction runs fixed settings: that a fit stopped at max_iter
         # while still improving is a fact for the table, not advice.
         warnings.simplefilter("always", ConvergenceWarning)
-        model.fit(data.X_est, data.y_est)
+        model.fit(data["X_est"], data["y_est"])
     fit_time = time.perf_counter() - start
     for warning in caught:
         if not issubclass(warning.category, ConvergenceWarning):
@@ -238,6 +239,25 @@ def _fit_and_score(factory, seed, data, records, scale):
                                    for w in caught)}
 
 
+def _check_evaluation(data, records, random_states):
+    """ValueErrors that name the argument of :func:`evaluate` that cannot be used."""
+    missing = [key for key in ("X_est", "y_est") if key not in data]
+    if missing:
+        raise ValueError(f"data must hold the estimation record X_est, y_est; it lacks "
+                         f"{', '.join(missing)}.")
+    if len(random_states) == 0:
+        raise ValueError("random_states must hold at least one random state.")
+    for name, record in records.items():
+        if not (isinstance(record, tuple) and len(record) == 3):
+            raise ValueError(f"records[{name!r}] must be a tuple (X, y, n_skip).")
+        n_samples, n_skip = len(record[1]), record[2]
+        if (not isinstance(n_skip, numbers.Integral) or isinstance(n_skip, bool)
+                or not 0 <= n_skip < n_samples):
+            raise ValueError(
+                f"records[{name!r}]: n_skip must be an integer from 0 to {n_samples - 1} "
+                f"(the record has {n_samples} samples), got {n_skip!r}.")
+
+
 @validate_params(
     {"data": [HasMethods(["keys"])], "models": [list], "records": [dict],
      "random_states": ["array-like"], "scale": [POSITIVE_FINITE], "n_jobs": [int, None],
@@ -250,15 +270,16 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, n_job
 
     Parameters
     ----------
-    data : Bunch
+    data : Bunch or dict
         With ``X_est``, ``y_est``.
     models : list of (str, callable)
         ``(label, factory)``; ``factory(random_state)`` returns an estimator.
     records : dict
         ``{name: (X, y, n_skip)}``, the test records; the first ``n_skip``
-        samples set the initial state and are not scored.
+        samples (an integer from 0 to ``len(y) - 1``) set the initial state
+        and are not scored.
     random_states : sequence of int, default=(0, 1, 2)
-        Random states of the fits.
+        Random states of the fits, at least one.
     scale : float, default=1.0
         Factor applied to the RMS errors (e.g. 1e3 for mV).
     n_jobs : int, default=None
@@ -277,6 +298,7 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, n_job
     fitted : dict
         The fitted model of the first random state, by label.
     """
+    _check_evaluation(data, records, random_states)
     # Every (model, random state) pair is one job: the slow models do not
     # leave workers idle while the fast ones wait for their turn.
     jobs = [(label, factory, seed) for label, factory in models for seed in random_states]

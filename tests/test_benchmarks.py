@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
 from sknlss import BLAEstimator, PNLSSRegressor, benchmarks
@@ -112,3 +113,39 @@ def test_evaluate_counts_fits_stopped_while_improving():
         rows, _ = evaluate(data, [("PNLSS", factory)], records, random_states=(0, 1))
     assert rows[0]["still_improving"] == 2
     assert "at max_iter" in format_table(rows, records, "V")
+
+
+@pytest.mark.parametrize("data, records, random_states, message", [
+    ({"X_est": np.zeros((8, 1))}, {}, (0,), "lacks y_est"),
+    (None, {}, (), "at least one random state"),
+    (None, {"test": (None, np.zeros(20), -5)}, (0,), r"records\['test'\]: n_skip must be "
+                                                    r"an integer from 0 to 19"),
+    (None, {"test": (None, np.zeros(20), 2.5)}, (0,), "n_skip must be an integer"),
+    (None, {"test": (None, np.zeros(20), 20)}, (0,), "n_skip must be an integer"),
+    (None, {"test": (None, np.zeros(20))}, (0,), r"must be a tuple \(X, y, n_skip\)"),
+])
+def test_evaluate_names_the_argument_it_cannot_use(data, records, random_states, message):
+    data = make_cascaded_tanks(n_samples=64, random_state=0) if data is None else data
+    with pytest.raises(ValueError, match=message):
+        evaluate(data, [("BLA", lambda seed: BLAEstimator(n_states=1))], records,
+                 random_states=random_states)
+
+
+def test_evaluate_takes_a_plain_dict_and_a_holdout_search():
+    from sknlss.model_selection import HoldoutSearch
+
+    data = make_cascaded_tanks(n_samples=256, random_state=0)
+    records = {"tail": (data.X_test, data.y_test, 50)}
+    search = HoldoutSearch(PNLSSRegressor(n_states=1, degree=2, max_iter=2, n_init=1),
+                           validation_fractions=(0.3,))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        rows, fitted = evaluate({"X_est": data.X_est, "y_est": data.y_est},
+                                [("search", lambda seed: clone(search))], records,
+                                random_states=(0,))
+    model = fitted["search"]
+    x0 = model.estimate_initial_state(data.X_test[:50], data.y_test[:50])
+    np.testing.assert_array_equal(
+        x0, model.best_estimator_.estimate_initial_state(data.X_test[:50], data.y_test[:50]))
+    assert rows[0]["tail"] == pytest.approx(
+        rms_error(data.y_test[50:], model.predict(data.X_test, x0=x0)[50:]), rel=1e-9)

@@ -120,6 +120,25 @@ def test_bounded_bases_stay_bounded():
         assert np.all(np.isfinite(slopes))
 
 
+def test_a_grid_search_sets_the_basis_parameters(records):
+    from sklearn.model_selection import GridSearchCV, TimeSeriesSplit
+
+    u, y, _, _ = records
+    search = GridSearchCV(NLLFRRegressor(n_states=2, basis=LegendreBasis(2), max_iter=2,
+                                         n_init=1),
+                          {"basis__degree": [2, 3]}, cv=TimeSeriesSplit(2))
+    search.fit(u, y)
+    assert search.best_estimator_.basis.degree in (2, 3)
+    assert search.estimator.basis.degree == 2
+    with pytest.raises(ValueError, match="LegendreBasis has no parameter 'kind'"):
+        LegendreBasis().set_params(kind="odd")
+
+
+def test_a_basis_rejects_non_finite_inputs():
+    with pytest.raises(ValueError, match="z must be finite"):
+        LegendreBasis(3).evaluate([0.0, np.nan])
+
+
 @pytest.mark.parametrize("basis, message", [
     (PolynomialBasis(1), "degree must be an int >= 2"),
     (PolynomialBasis(2, kind="odd"), "needs degree >= 3"),

@@ -120,6 +120,8 @@ class _Basis:
         values, slopes : ndarray of shape (n_points, n_functions)
         """
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1)
+        if not np.all(np.isfinite(z)):
+            raise ValueError(f"{type(self).__name__}.evaluate: z must be finite.")
         return _evaluate_points(self.code, self.degrees, z)
 
     def get_params(self, deep=True):
@@ -135,6 +137,27 @@ class _Basis:
         params : dict
         """
         return {name: getattr(self, name) for name in self._param_names}
+
+    def set_params(self, **params):
+        """Set constructor parameters (``basis__degree`` in a grid search).
+
+        Parameters
+        ----------
+        **params : dict
+            Parameter names and values.
+
+        Returns
+        -------
+        self : object
+        """
+        for name, value in params.items():
+            if name not in self._param_names:
+                raise ValueError(
+                    f"{type(self).__name__} has no parameter {name!r}; its parameters are "
+                    f"{list(self._param_names)}."
+                )
+            setattr(self, name, value)
+        return self
 
     def __repr__(self):
         params = ", ".join(f"{key}={value!r}" for key, value in self.get_params().items())
