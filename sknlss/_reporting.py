@@ -1,9 +1,12 @@
 """Files written by the benchmark reproductions: result tables and figures."""
 
 import csv
+import warnings
 from pathlib import Path
 
 import numpy as np
+
+from .exceptions import SimulationDivergedWarning
 
 # The output noise is read from the spectrum above the excited band, from this
 # multiple of its upper edge up to the Nyquist frequency.
@@ -45,9 +48,12 @@ def _write_figures(name, benchmark, data, fitted, output):
     paths = []
     Ts = data.sampling_time
     record, (X, y, skip) = next(iter(benchmark.records(data).items()))
-    # As in the tables: the first samples of the record set the state.
-    simulations = {label: _simulate_record(model, X, y, skip)
-                   for label, model in fitted.items()}
+    # As in the tables: the first samples of the record set the state. A
+    # diverging simulation is said once, in the list of models not drawn.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SimulationDivergedWarning)
+        simulations = {label: _simulate_record(model, X, y, skip)
+                       for label, model in fitted.items()}
     finite = {label: y_sim for label, y_sim in simulations.items()
               if np.all(np.isfinite(y_sim))}
     bla = next((model for model in fitted.values() if hasattr(model, "frf_")), None)

@@ -55,6 +55,26 @@ def test_reproduce_writes_tables_and_figures(monkeypatch, tmp_path):
     assert "Tiny tanks" in out.getvalue()
 
 
+def test_a_diverging_model_is_listed_not_drawn_and_does_not_warn(monkeypatch, tmp_path):
+    from sknlss.exceptions import SimulationDivergedWarning
+
+    simulate = benchmarks._simulate_record
+
+    def diverging_one_state(model, X, y, n_skip):
+        if model.n_states == 1:
+            warnings.warn("diverged", SimulationDivergedWarning)
+            return np.full(len(y), np.nan)
+        return simulate(model, X, y, n_skip)
+
+    monkeypatch.setattr(benchmarks, "_simulate_record", diverging_one_state)
+    monkeypatch.setitem(BENCHMARKS, "tiny", _tiny_benchmark())
+    out = io.StringIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimulationDivergedWarning)
+        reproduce(["tiny"], output=tmp_path, random_states=(0,), out=out)
+    assert "Not drawn (diverged): BLA 1" in out.getvalue()
+
+
 def test_missing_data_fall_back_to_simulated(monkeypatch):
     def missing(home, download_if_missing):
         raise FileNotFoundError("no data here")
