@@ -86,7 +86,9 @@ ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
 # %%
 # Test record (paper Fig. 8)
 # --------------------------
-fig = plot_simulation(data.y_test, predictions, sampling_time=data.sampling_time,
-                      unit="V")
+# A simulation that diverges on the test record cannot be drawn; it is left
+# out of the figure (its line above says so).
+drawn = {name: y_test for name, y_test in predictions.items() if np.all(np.isfinite(y_test))}
+fig = plot_simulation(data.y_test, drawn, sampling_time=data.sampling_time, unit="V")
 fig.suptitle("Test record")
 plt.show()
