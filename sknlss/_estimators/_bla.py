@@ -17,7 +17,7 @@ from threadpoolctl import threadpool_limits
 
 from .._core._model import StateSpaceModel
 from .._core._sequences import transient_mask
-from .._linear._frf import LPM_POWER_THRESHOLD, lpm_frf, robust_frf
+from .._linear._frf import LPM_POWER_THRESHOLD, lpm_estimate, lpm_records, robust_frf
 from .._linear._realization import (
     balanced_realization,
     estimate_initial_state,
@@ -109,13 +109,16 @@ def _frf_method(params):
     return params["method"]
 
 
-def _nonparametric(U, Y, starts, params, lpm_power_threshold=LPM_POWER_THRESHOLD):
+def _nonparametric(U, Y, starts, params):
+    """The nonparametric estimates to fit: the robust method's, or the LPM's
+    on the bins whose window holds at least 1e-3 and 1e-2 of the largest
+    window's input power (see :func:`_fit_linear_model`)."""
     period, n_transient = params["period"], params["n_transient"]
     if _frf_method(params) == "robust":
         if period is None:
             raise ValueError('method="robust" needs the `period` of the excitation.')
-        return robust_frf(U, Y, starts, period, n_transient=n_transient,
-                          max_frequency=params["max_frequency"])
+        return [robust_frf(U, Y, starts, period, n_transient=n_transient,
+                           max_frequency=params["max_frequency"])]
     lengths = np.diff(starts)
     if lengths.min() - n_transient < 2:
         k = int(np.argmin(lengths))
@@ -126,10 +129,11 @@ def _nonparametric(U, Y, starts, params, lpm_power_threshold=LPM_POWER_THRESHOLD
             f"after n_transient={n_transient}: the Local Polynomial Method needs at "
             "least 2 per sequence. Lower n_transient or leave that sequence out."
         )
-    return lpm_frf(U, Y, starts, order=params["lpm_order"],
-                   bandwidth=params["lpm_bandwidth"], n_transient=n_transient,
-                   max_frequency=params["max_frequency"],
-                   power_threshold=lpm_power_threshold)
+    records = lpm_records(U, Y, starts, order=params["lpm_order"],
+                          bandwidth=params["lpm_bandwidth"], n_transient=n_transient,
+                          max_frequency=params["max_frequency"])
+    return [lpm_estimate(records, threshold)
+            for threshold in (LPM_POWER_THRESHOLD, _STRICT_POWER_THRESHOLD)]
 
 
 def fit_linear_model(U, Y, starts, params):
@@ -164,21 +168,21 @@ def fit_linear_model(U, Y, starts, params):
 
 def _fit_linear_model(U, Y, starts, params):
     mask = transient_mask(starts, params["n_transient"])
-    fit = _parametric(_nonparametric(U, Y, starts, params), U, Y, starts, mask, params)
-    if _frf_method(params) != "lpm":
-        return fit
-    # A few far-off lines can pull the model away, typically the leakage of
-    # an input that is not periodic in the record just above its band edge (a
-    # cut multisine, a band-limited reference with a slow drift): the LPM's
-    # windows there hold input power above the default threshold. Keeping only
-    # the strongest windows removes them, but can also drop lines the model
-    # needs; the model that simulates the estimation rows better wins.
-    try:
-        strict = _parametric(_nonparametric(U, Y, starts, params, _STRICT_POWER_THRESHOLD),
-                             U, Y, starts, mask, params)
-    except (ValueError, np.linalg.LinAlgError):
-        return fit
-    return strict if strict.simulation_error < fit.simulation_error else fit
+    first, *others = _nonparametric(U, Y, starts, params)
+    fits = [_parametric(first, U, Y, starts, mask, params)]
+    # A few far-off lines can pull the LPM model away, typically the leakage
+    # of an input that is not periodic in the record just above its band edge
+    # (a cut multisine, a band-limited reference with a slow drift): the
+    # LPM's windows there hold input power above the default threshold.
+    # Keeping only the strongest windows removes them, but can also drop
+    # lines the model needs (or leave too few for it); the model that
+    # simulates the estimation rows better wins, the first on a tie.
+    for estimate in others:
+        try:
+            fits.append(_parametric(estimate, U, Y, starts, mask, params))
+        except (ValueError, np.linalg.LinAlgError):
+            pass
+    return min(fits, key=lambda fit: fit.simulation_error)
 
 
 def _parametric(estimate, U, Y, starts, mask, params):

@@ -217,8 +217,9 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
     return n_bins, 0
 
 
-def _lpm_record(U, Y, order, bandwidth, max_frequency, power_threshold):
-    """LPM on one record: (frequencies, FRF, variance or None)."""
+def _lpm_record(U, Y, order, bandwidth, max_frequency):
+    """LPM on one record, on its bins below ``max_frequency``: (frequencies,
+    FRF, variance or None, input power of each bin's window)."""
     n, n_u = U.shape
     n_bins = (n - 1) // 2  # positive bins below Nyquist
     width, order = lpm_window(n_u, order, n_bins, bandwidth)
@@ -255,8 +256,56 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency, power_threshold):
     window_power = np.sum(np.abs(Uw) ** 2, axis=(1, 2))
     bins = np.arange(1, n_bins + 1)
     keep = _band_mask(bins, n, max_frequency)
-    keep &= window_power > power_threshold * window_power[keep].max(initial=0.0)
-    return bins[keep] / n, G[keep], None if var is None else var[keep]
+    return (bins[keep] / n, G[keep], None if var is None else var[keep],
+            window_power[keep])
+
+
+def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
+    """The LPM of every sequence on its own, before any bin is left out for
+    its window's input power (see :func:`lpm_estimate`).
+
+    Parameters are those of :func:`lpm_frf`.
+
+    Returns
+    -------
+    records : list of tuple
+        Per sequence: frequencies, FRF, variance (or None) and the input
+        power of each bin's window.
+    """
+    return [
+        _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
+                    bandwidth, max_frequency)
+        for begin, end in zip(starts[:-1], starts[1:])
+    ]
+
+
+def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
+    """The FRF estimate of :func:`lpm_records` on the bins whose window holds
+    at least ``power_threshold`` times the largest window power of their
+    record; estimates at equal frequencies combined (see :func:`lpm_frf`)."""
+    parts = []
+    for freqs, G, var, power in records:
+        keep = power > power_threshold * power.max(initial=0.0)
+        parts.append((freqs[keep], G[keep], None if var is None else var[keep]))
+    freqs = np.concatenate([p[0] for p in parts])
+    if freqs.size == 0:
+        raise ValueError("The input X has no power on any usable frequency bin.")
+    G = np.concatenate([p[1] for p in parts])
+    if any(p[2] is None for p in parts):
+        var = None
+        weight = np.ones(G.shape)
+    else:
+        var = np.concatenate([p[2] for p in parts])
+        weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
+    unique, group = np.unique(freqs, return_inverse=True)
+    if unique.size < freqs.size:
+        wsum = np.zeros((unique.size,) + G.shape[1:])
+        np.add.at(wsum, group, weight)
+        Gsum = np.zeros((unique.size,) + G.shape[1:], dtype=complex)
+        np.add.at(Gsum, group, weight * G)
+        G = Gsum / wsum
+        var = None if var is None else 1.0 / wsum
+    return FRFEstimate(unique, G, var, var)
 
 
 def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None,
@@ -295,27 +344,6 @@ def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequen
         Records of different lengths contribute their own bins; estimates at
         equal frequencies are combined by inverse-variance weighting.
     """
-    parts = [
-        _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
-                    bandwidth, max_frequency, power_threshold)
-        for begin, end in zip(starts[:-1], starts[1:])
-    ]
-    freqs = np.concatenate([p[0] for p in parts])
-    if freqs.size == 0:
-        raise ValueError("The input X has no power on any usable frequency bin.")
-    G = np.concatenate([p[1] for p in parts])
-    if any(p[2] is None for p in parts):
-        var = None
-        weight = np.ones(G.shape)
-    else:
-        var = np.concatenate([p[2] for p in parts])
-        weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
-    unique, group = np.unique(freqs, return_inverse=True)
-    if unique.size < freqs.size:
-        wsum = np.zeros((unique.size,) + G.shape[1:])
-        np.add.at(wsum, group, weight)
-        Gsum = np.zeros((unique.size,) + G.shape[1:], dtype=complex)
-        np.add.at(Gsum, group, weight * G)
-        G = Gsum / wsum
-        var = None if var is None else 1.0 / wsum
-    return FRFEstimate(unique, G, var, var)
+    records = lpm_records(U, Y, starts, order=order, bandwidth=bandwidth,
+                          n_transient=n_transient, max_frequency=max_frequency)
+    return lpm_estimate(records, power_threshold)
