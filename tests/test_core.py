@@ -274,14 +274,21 @@ def test_restricted_problem():
     assert restricted.validation_loss is None
 
 
-@pytest.mark.parametrize("jacobian", [True, False])
-def test_validation_loss_reuses_only_the_same_iterate(jacobian):
+def _held_out_problem():
+    """A problem with its last 30 % held out, its true parameters and data."""
     model, theta = _model("polynomial", DIMS["SISO"], seed=7)
     U = 0.5 * np.random.default_rng(8).standard_normal((80, 1))
     starts = np.array([0, 80])
     Y = model.simulate(theta, U, starts)[0] + 0.01 * np.random.default_rng(9).normal(size=U.shape)
     problem = SimulationErrorProblem(model, fit_rows(U, Y, starts, n_transient=0,
                                                      validation_fraction=0.3))
+    return problem, theta, U, Y, starts
+
+
+@pytest.mark.parametrize("jacobian", [True, False])
+def test_validation_loss_reuses_only_the_same_iterate(jacobian):
+    problem, theta, U, Y, starts = _held_out_problem()
+    model = problem.model
 
     def fresh_loss(th):
         Y_model = model.simulate(th, U, starts)[0]
@@ -295,6 +302,40 @@ def test_validation_loss_reuses_only_the_same_iterate(jacobian):
     problem.residual(other, jacobian)
     assert problem.validation_loss(theta) == fresh_loss(theta)
     assert fresh_loss(theta) != fresh_loss(other)
+
+
+def test_held_out_loss_needs_the_cost_rows_fitted_within_the_limit():
+    problem, theta, U, Y, starts = _held_out_problem()
+    model = problem.model
+    worse = theta.copy()
+    worse[model.columns("C")] *= 0.5
+    Y_worse = model.simulate(worse, U, starts)[0]
+    fit_error = np.mean((Y_worse[problem.fit_rows] - Y[problem.fit_rows]) ** 2)
+    held_out_error = np.mean((Y_worse[problem.val_rows] - Y[problem.val_rows]) ** 2)
+    assert problem.fit_loss(worse) == fit_error
+    assert problem.held_out_loss(worse) == held_out_error
+    problem.fit_loss_limit = fit_error
+    assert problem.held_out_loss(worse) == held_out_error
+    problem.fit_loss_limit = 0.99 * fit_error
+    assert problem.held_out_loss(worse) == np.inf
+    assert problem.validation_loss(worse) == np.inf
+    assert problem.held_out_loss(theta) < held_out_error
+
+
+def test_early_stopping_keeps_only_iterates_within_the_fit_limit():
+    problem, theta = _held_out_problem()[:2]
+    start = theta.copy()
+    start[problem.model.columns("C")] *= 0.5
+    # No iterate can fit the cost rows this well: none is judged on the
+    # held-out rows, and the start point is returned.
+    problem.fit_loss_limit = 0.0
+    theta_kept, result = fit_from(problem, [start], label="test", max_iter=5)
+    np.testing.assert_array_equal(theta_kept, start)
+    assert np.all(np.isinf(result.validation_history))
+    problem.fit_loss_limit = np.inf
+    theta_kept, result = fit_from(problem, [start], label="test", max_iter=5)
+    assert np.isfinite(result.validation_history).all()
+    assert not np.array_equal(theta_kept, start)
 
 
 def test_fit_from_skips_candidates_that_diverge():

@@ -290,6 +290,9 @@ class SimulationErrorProblem:
         # penalties add a varying number of rows.
         self.n_residuals = self.target.size
         self.validation_loss = self._validation_loss if self.val_rows.any() else None
+        # Mean squared error on the cost rows above which a model is not judged
+        # on the held-out rows (see ``held_out_loss``); set by the estimators.
+        self.fit_loss_limit = np.inf
         self.decay_scale = None
         # (theta, outputs, diverged) of the last residual: the optimiser asks
         # for the held-out loss of the iterate whose residual it has just
@@ -427,15 +430,44 @@ class SimulationErrorProblem:
         """
         return _Restricted(self, theta, free)
 
+    def fit_loss(self, theta):
+        """Mean squared simulation error of ``theta`` on the cost rows; inf when
+        it diverges."""
+        Y_model, _, diverged = self.simulate(theta)
+        if diverged:
+            return np.inf
+        return _mean_squared_error(Y_model, self.Y, self.fit_rows)
+
+    def held_out_loss(self, theta, simulation=None):
+        """Mean squared simulation error of ``theta`` on the held-out rows (the
+        cost rows when nothing is held out).
+
+        It is inf when the simulation diverges, and when its error on the cost
+        rows exceeds ``fit_loss_limit``: among the many iterates and starts
+        judged on a short held-out end, one that has not learnt its own cost
+        rows (as well as the linear model has) can match that end by accident.
+        ``simulation``, when given, is the ``(outputs, diverged)`` of ``theta``.
+        """
+        if simulation is None:
+            Y_model, _, diverged = self.simulate(theta)
+        else:
+            Y_model, diverged = simulation
+        if diverged:
+            return np.inf
+        if _mean_squared_error(Y_model, self.Y, self.fit_rows) > self.fit_loss_limit:
+            return np.inf
+        rows = self.val_rows if self.val_rows.any() else self.fit_rows
+        return _mean_squared_error(Y_model, self.Y, rows)
+
     def _validation_loss(self, theta):
         last = self._last_simulation
         if last is not None and np.array_equal(last[0], theta):
-            _, Y_model, diverged = last
-        else:
-            Y_model, _, diverged = self.simulate(theta)
-        if diverged:
-            return np.inf
-        return float(np.mean((Y_model[self.val_rows] - self.Y[self.val_rows]) ** 2))
+            return self.held_out_loss(theta, last[1:])
+        return self.held_out_loss(theta)
+
+
+def _mean_squared_error(Y_model, Y, rows):
+    return float(np.mean((Y_model[rows] - Y[rows]) ** 2))
 
 
 class _Restricted:

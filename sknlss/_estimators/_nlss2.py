@@ -28,7 +28,7 @@ from .._core._sequences import part_before_holdout
 from .._linear._state_estimation import estimate_states
 from .._terms._network import ACTIVATIONS, NetworkTerms
 from .._validation import Integers
-from ._nonlinear import _BaseNonlinearStateSpace, holdout_loss
+from ._nonlinear import _BaseNonlinearStateSpace
 
 #: Candidate state-estimation weights tried by ``alpha="auto"``.
 ALPHA_GRID = np.logspace(-2, 3, 6)
@@ -276,13 +276,15 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         the fitted rows plus the penalty terms, divided by the number of
         fitted residuals.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
-        Validation loss per iteration, when ``validation_fraction > 0``.
+        Mean squared simulation error on the held-out rows per iteration
+        (``inf`` where the error on the fitted rows exceeds the linear model's).
     best_iteration_ : int
         Iteration of the kept start whose parameters were kept.
     start_losses_ : ndarray of shape (n_init,)
         Mean squared simulation error of every start on the end of the
-        sequences that all starts held out (``inf`` for a start that failed or
-        that ran away on the enlarged estimation input).
+        sequences that all starts held out (``inf`` for a start that failed,
+        that ran away on the enlarged estimation input or that fits its own
+        rows worse than the linear model).
     fell_back_to_linear_ : bool
         True when no start beat the linear model there, or the record is too
         short for the nonlinear terms (with a
@@ -421,7 +423,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
             # The same network seed for every candidate (paper §4.2).
             seed = check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
             self.alpha_losses_ = np.array([
-                holdout_loss(problem, _initial_theta(context, alpha, self.activation,
+                problem.held_out_loss(_initial_theta(context, alpha, self.activation,
                                                         self.n_neurons, seed))
                 for alpha in ALPHA_GRID
             ])

@@ -57,6 +57,9 @@ _MIN_SPLIT_LENGTH = 100
 #: share of the shortest sequence.
 _SETTLED = 1e-2
 _MAX_TRANSIENT_SHARE = 0.1
+#: Relative margin above the linear start's error on the cost rows within which
+#: a model still counts as fitting them as well (rounding of the simulations).
+_ROUNDING_MARGIN = 1e-9
 #: A selected model must stay within ten times the measured output's range
 #: when the estimation input is enlarged by a fifth (see ``stays_bounded``).
 _GUARD_GAIN = 1.2
@@ -357,7 +360,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             theta_best, result = self._fit_linear_part(problem, self._linear_model(model, theta))
             # No start could be made: each counts as left out.
             self.start_losses_ = np.full(self.n_init, np.inf)
-            self.linear_loss_ = holdout_loss(problem_sets[0][min(shares)], theta_best)
+            self.linear_loss_ = problem_sets[0][min(shares)].held_out_loss(theta_best)
             self.fell_back_to_linear_ = True
         else:
             # Further candidates with more parameters than cost values are left out.
@@ -398,6 +401,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                        "starts": starts, "rows": problem.rows, "seeds": seeds}
             self._prepare_starts(context)
             contexts.append(context)
+        linear_theta = self._linear_model(contexts[0]["model"], theta)
+        linear_values = contexts[0]["model"].unpack(linear_theta)
+        for problems in problem_sets:
+            # A model is judged on the held-out end only where it fits its own
+            # rows at least as well as the linear model it must beat.
+            for start_problem in problems.values():
+                reference = with_linear_part(start_problem.model, linear_values)
+                start_problem.fit_loss_limit = (start_problem.fit_loss(reference)
+                                                * (1 + _ROUNDING_MARGIN))
         k = len(problem_sets)
         runs = [(i % k, i // k, shares[i // k], seeds[i // k]) for i in range(self.n_init)]
         outcomes = run_starts(
@@ -416,7 +428,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         common = [problems[min(shares)] for problems in problem_sets]
         losses = [np.inf if isinstance(outcome, Exception)
                   or not stays_bounded(common[c], outcome[0])
-                  else holdout_loss(common[c], outcome[0])
+                  else common[c].held_out_loss(outcome[0])
                   for (c, *_), outcome in zip(runs, outcomes)]
         losses = _prefer_finite_when_doubled(
             losses, [(common[c], None if isinstance(outcome, Exception) else outcome[0])
@@ -425,8 +437,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         theta_best, result, start_warnings = outcomes[best]
         c_best, j_best, _, seed_best = runs[best]
         self.start_losses_ = np.asarray(losses)
-        linear_theta = self._linear_model(contexts[0]["model"], theta)
-        linear_loss = holdout_loss(common[0], linear_theta)
+        linear_loss = common[0].held_out_loss(linear_theta)
         # A nonlinear model that does worse than the linear model there is not
         # returned: the linear model is, and the attribute records it.
         self.linear_loss_ = linear_loss
@@ -586,11 +597,3 @@ def _prefer_finite_when_doubled(losses, starts):
     return [np.inf if escapes.get(i, False) else loss for i, loss in enumerate(losses)]
 
 
-def holdout_loss(problem, theta):
-    """Mean squared simulation error of ``theta`` on the problem's held-out rows
-    (its cost rows when nothing is held out); inf when it diverges."""
-    rows = problem.val_rows if problem.val_rows.any() else problem.fit_rows
-    Y, _, diverged = problem.simulate(theta)
-    if diverged:
-        return np.inf
-    return float(np.mean((Y[rows] - problem.Y[rows]) ** 2))

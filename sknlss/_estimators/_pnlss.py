@@ -181,13 +181,15 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         ``stability_penalty`` and ``weight_decay`` terms, divided by the
         number of fitted residuals.
     validation_loss_history_ : ndarray of shape (n_iter_ + 1,) or None
-        Mean squared simulation error on the held-out rows per iteration.
+        Mean squared simulation error on the held-out rows per iteration
+        (``inf`` where the error on the fitted rows exceeds the linear model's).
     best_iteration_ : int
         Iteration whose parameters were kept.
     start_losses_ : ndarray of shape (n_init,)
         Mean squared simulation error of every start on the end of the
-        sequences that all starts held out (``inf`` for a start that failed or
-        that ran away on the enlarged estimation input).
+        sequences that all starts held out (``inf`` for a start that failed,
+        that ran away on the enlarged estimation input or that fits its own
+        rows worse than the linear model).
     fell_back_to_linear_ : bool
         True when no start beat the linear model there, or the record is too
         short for the nonlinear terms (with a
