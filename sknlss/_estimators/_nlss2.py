@@ -424,7 +424,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
             seed = check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
             self.alpha_losses_ = np.array([
                 problem.held_out_loss(_initial_theta(context, alpha, self.activation,
-                                                        self.n_neurons, seed))
+                                                     self.n_neurons, seed))
                 for alpha in ALPHA_GRID
             ])
             self.alpha_ = float(ALPHA_GRID[int(np.argmin(self.alpha_losses_))])
