@@ -130,10 +130,11 @@ def _escaped(values, count, bound):
 
 
 @njit(cache=True, inline="always")
-def _step(A, B, C, D, h, s, n, n_u, n_y, x_next, y):
+def _step(A, B, C, D, h, s, x_next, y):
     """One sample of the model from the terms' values ``h`` at ``s = [x; u]``:
     writes ``x(t+1)`` to ``x_next`` and ``y(t)`` to ``y``; returns whether an
     output escaped :data:`DIVERGENCE_BOUND`."""
+    n, n_u, n_y = A.shape[0], B.shape[1], C.shape[0]
     for i in range(n):
         acc = h[i]
         for j in range(n):
@@ -234,7 +235,7 @@ def simulate(theta, n_outputs, n_terms, spec, work_init, U, starts, x0, evaluate
                 for j in range(n_u):
                     s[n + j] = U[t, j]
                 evaluate(theta_terms, spec, s, n, h, work)
-                failed = _step(A, B, C, D, h, s, n, n_u, n_y, x_next, Y[t])
+                failed = _step(A, B, C, D, h, s, x_next, Y[t])
             if failed:
                 Y[t:end] = np.nan
                 X[t:end] = np.nan
@@ -340,7 +341,7 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, 
             for j in range(n_u):
                 s[n + j] = U[t, j]
             evaluate(theta_terms, spec, s, n, h, work)
-            if _step(A, B, C, D, h, s, n, n_u, n_y, x_next, Y[t]):
+            if _step(A, B, C, D, h, s, x_next, Y[t]):
                 return Y, X, J, local, True
             for i in range(n):
                 X[t, i] = s[i]
