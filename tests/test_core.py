@@ -36,6 +36,11 @@ TERMS = {
     "polynomial-bounded": lambda n, n_u, n_y: PolynomialTerms(
         n, n_y, monomial_exponents(n, n_u, (2, 3)), monomial_exponents(n, n_u, (2, 3)),
         input_range=np.array([[-0.3], [0.2]]).repeat(n + n_u, axis=1)),
+    # The same box widened to twice its half-width, which the test data leave
+    # too, the monomials held beyond it.
+    "polynomial-held": lambda n, n_u, n_y: PolynomialTerms(
+        n, n_y, monomial_exponents(n, n_u, (2, 3)), monomial_exponents(n, n_u, (2, 3)),
+        input_range=np.array([[-0.3], [0.2]]).repeat(n + n_u, axis=1), reach=2.0, held=True),
     # Ranges that the branch inputs of the test data leave on both sides.
     "branches-continued": lambda n, n_u, n_y: BranchTerms(
         n, n_u, n_y, 2, PolynomialBasis(3), input_range=np.array([[-0.02, -0.01],
@@ -130,6 +135,43 @@ def test_polynomial_terms_match_plain_numpy(terms):
             np.testing.assert_allclose(Y[t], expected, rtol=1e-12, atol=1e-12)
             x = (values["A"] @ x + values["B"] @ U[t]
                  + values["E"] @ evaluate_monomials(s, exponents[0])[0])
+
+
+def test_reach_widens_the_box_about_its_centre():
+    n, n_u, n_y = DIMS["MIMO"]
+    exponents = [monomial_exponents(n, n_u, (2, 3))] * 2
+    box, wider = (np.array(ends).repeat(n + n_u, axis=1) for ends in ([[-0.3], [0.1]],
+                                                                        [[-0.5], [0.3]]))
+    _, theta = _model("polynomial-bounded", DIMS["MIMO"])
+    U, starts = _data(n_u)
+
+    def simulation(input_range, reach, held=False):
+        terms = PolynomialTerms(n, n_y, *exponents, input_range=input_range, reach=reach,
+                                held=held)
+        return StateSpaceModel(n, n_u, n_y, terms).simulate(theta, U, starts)
+
+    for held in (False, True):
+        Y, X, _ = simulation(box, 2.0, held)
+        S = np.hstack([X, U])
+        assert np.any((S < wider[0] - 1e-9) | (S > wider[1] + 1e-9))
+        np.testing.assert_allclose(Y, simulation(wider, 1.0, held)[0], rtol=1e-12, atol=1e-12)
+        assert not np.allclose(Y, simulation(box, 1.0, held)[0])
+        assert not np.allclose(Y, simulation(box, np.inf)[0])
+
+
+def test_held_monomials_keep_their_value_on_the_box():
+    n, n_u, n_y = DIMS["MIMO"]
+    model, theta = _model("polynomial-held", DIMS["MIMO"])
+    theta[model.columns("C", "D")] = 0.0
+    U, starts = _data(n_u)
+    Y, X, _ = model.simulate(theta, U, starts)
+    lower, upper = model.terms.input_range
+    wider = np.vstack([1.5 * lower - 0.5 * upper, 1.5 * upper - 0.5 * lower])
+    S = np.hstack([X, U])
+    assert np.any((S < wider[0]) | (S > wider[1]))
+    F = model.unpack(theta)["F"]
+    expected = evaluate_monomials(np.clip(S, *wider), model.terms.exponents[1]) @ F.T
+    np.testing.assert_allclose(Y, expected, rtol=1e-12, atol=1e-12)
 
 
 def test_divergence_rule_on_states_and_outputs():

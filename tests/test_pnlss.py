@@ -148,12 +148,14 @@ def test_extrapolation_changes_only_predictions_beyond_the_estimation_box():
     options = dict(n_states=1, degree=2, max_iter=20, **PLAIN)
     linear = _fit_quiet(PNLSSRegressor(extrapolation="linear", **options), u, y)
     continued = _fit_quiet(PNLSSRegressor(extrapolation="continue", **options), u, y)
-    np.testing.assert_array_equal(linear.E_, continued.E_)
-    np.testing.assert_array_equal(linear.predict(u), continued.predict(u))
-    # The box is where the states and the scaled inputs went, whatever the
-    # continuation.
-    np.testing.assert_array_equal(linear.polynomial_input_range_,
-                                  continued.polynomial_input_range_)
+    bounded = _fit_quiet(PNLSSRegressor(extrapolation="bounded", **options), u, y)
+    for other in (continued, bounded):
+        np.testing.assert_array_equal(linear.E_, other.E_)
+        np.testing.assert_array_equal(linear.predict(u), other.predict(u))
+        # The box is where the states and the scaled inputs went, whatever
+        # the continuation.
+        np.testing.assert_array_equal(linear.polynomial_input_range_,
+                                      other.polynomial_input_range_)
     S = np.hstack([linear.simulate(u, return_states=True)[1],
                    (u - linear.u_offset_) / linear.u_scale_])
     np.testing.assert_allclose(linear.polynomial_input_range_, [S.min(axis=0), S.max(axis=0)])
@@ -164,6 +166,12 @@ def test_extrapolation_changes_only_predictions_beyond_the_estimation_box():
         beyond = continued.predict(3.0 * u)
     assert np.all(np.isfinite(linear.predict(3.0 * u)))
     assert not np.allclose(linear.predict(3.0 * u), beyond, equal_nan=True)
+    # Held beyond twice the box, the polynomial is bounded, and so is the
+    # prediction of a model whose linear part is stable, whatever the input.
+    assert np.max(np.abs(np.linalg.eigvals(bounded.A_))) < 1.0
+    for gain in (3.0, 100.0):
+        assert np.all(np.isfinite(bounded.predict(gain * u)))
+    assert not np.allclose(bounded.predict(3.0 * u), linear.predict(3.0 * u))
 
 
 def test_initial_state_and_validation_split():
@@ -216,7 +224,8 @@ def test_unstable_input_warns_without_crash():
     y = _quadratic_system(u)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        model = PNLSSRegressor(1, degree=2, max_iter=20).fit(u, y)
+        # The polynomial continued as itself escapes on a large input.
+        model = PNLSSRegressor(1, degree=2, max_iter=20, extrapolation="continue").fit(u, y)
     with pytest.warns(SimulationDivergedWarning):
         y_big = model.predict(np.full((100, 1), 5.0))
     assert np.isnan(y_big[-1]) and np.isfinite(y_big[0])

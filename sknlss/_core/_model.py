@@ -72,31 +72,47 @@ _UNBOUNDED = np.array([[-np.inf], [np.inf]])
 
 
 class RangedTerms(Terms):
-    """Terms that go on along their tangents beyond a range of their inputs.
+    """Terms that go on otherwise beyond a box around the range of their
+    inputs: along their tangents, or held at their value on its edge where
+    the subclass allows it.
 
     Subclasses call :meth:`_set_range` and set ``_range_offset``, the position
-    in the work array of the range's ``2 * n_ranged`` bounds (all lower ends,
+    in the work array of the box's ``2 * n_ranged`` bounds (all lower ends,
     then all upper ends).
     """
 
     _range_offset = 0
 
-    def _set_range(self, input_range, continued, n_ranged):
-        """``input_range`` of shape (2, n_ranged), ``None`` for no bound; with
-        ``continued`` the terms are themselves beyond it too (it is then only a
-        record of where their inputs went)."""
+    def _set_range(self, input_range, reach, n_ranged):
+        """``input_range`` of shape (2, n_ranged), ``None`` for no bound. The
+        terms are themselves inside the box of ``reach`` times the range's
+        half-width about its centre; ``reach=inf``: everywhere (the range is
+        then only a record of where their inputs went)."""
         if input_range is None:
             input_range = _UNBOUNDED.repeat(n_ranged, axis=1)
         self.input_range = np.asarray(input_range, dtype=np.float64)
-        self.continued = continued
+        self.reach = float(reach)
+
+    @property
+    def continued(self):
+        """Whether the terms are themselves everywhere."""
+        return self.reach == np.inf
 
     @property
     def work_init(self):
-        """The work array with the range beyond which the terms go on along
-        their tangents (unbounded when they are continued)."""
+        """The work array with the box beyond which the terms go on otherwise
+        (unbounded when they are continued)."""
         work = np.zeros(self.work_size)
         n_ranged = self.input_range.shape[1]
-        bounds = _UNBOUNDED if self.continued else self.input_range
+        if self.continued:
+            bounds = _UNBOUNDED
+        elif self.reach == 1.0:
+            bounds = self.input_range
+        else:
+            centre = self.input_range.mean(axis=0)
+            half_width = np.ptp(self.input_range, axis=0) / 2
+            bounds = np.vstack([centre - self.reach * half_width,
+                                centre + self.reach * half_width])
         start = self._range_offset
         work[start : start + 2 * n_ranged] = np.broadcast_to(bounds, (2, n_ranged)).ravel()
         return work

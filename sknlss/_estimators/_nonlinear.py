@@ -526,15 +526,23 @@ def with_linear_part(model, linear):
     return model.pack(values)
 
 
+#: How each named extrapolation continues the terms beyond the range of their
+#: inputs (see ``RangedTerms``; "bounded" is for polynomial terms only).
+_CONTINUATIONS = {"linear": {}, "continue": {"reach": np.inf},
+                  "bounded": {"reach": 2.0, "held": True}}
+
+
 def ranged_prediction_terms(model, theta, U, starts, extrapolation):
     """The terms of ``model`` for prediction, with the range that their inputs
-    take when ``theta`` simulates the estimation record ``U``: beyond it, with
+    take when ``theta`` simulates the estimation record ``U``. Beyond it, with
     ``extrapolation="linear"``, the terms go on along their tangents; with
-    ``"continue"``, as themselves (the range is then only recorded)."""
+    ``"continue"``, as themselves (the range is then only recorded); with
+    ``"bounded"``, as themselves out to twice the range's half-width about
+    its centre, held at their value on the edge of that box beyond it."""
     _, X, _ = model.simulate(theta, U, starts)
     S = np.hstack([X, U])
     return model.terms.with_input_range(model.unpack(theta), S[np.all(np.isfinite(S), axis=1)],
-                                        continued=extrapolation == "continue")
+                                        **_CONTINUATIONS[extrapolation])
 
 
 def n_cost_values(problem):

@@ -48,16 +48,22 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         powers only, those in u only, or an explicit exponent array.
     output_terms : same as ``state_terms``, default="full"
         Monomials of the output equation.
-    extrapolation : {"continue", "linear"}, default="continue"
+    extrapolation : {"bounded", "continue", "linear"}, default="bounded"
         How the polynomials go on beyond the box that the states and inputs
         filled on the estimation record (``polynomial_input_range_``, each
-        variable's range). ``"continue"``: as themselves (a polynomial keeps
-        its curvature, which suits a hardening law such as a cubic spring).
-        ``"linear"``: along their tangent planes at the nearest point of the
-        box, so that where the data did not go the terms grow no faster than
-        linearly (for saturation, friction, or a state, such as a position,
-        that leaves its range without the law changing). The fit is the same
-        either way; only predictions beyond the box differ.
+        variable's range). ``"bounded"``: as themselves out to twice the box
+        (each range widened twice about its centre), and beyond it held at
+        their value on its edge, so that the prediction of a model whose
+        ``A_`` is stable stays bounded for any bounded input, while moderate
+        extrapolation keeps the polynomials' curvature. ``"continue"``: as
+        themselves everywhere (a polynomial keeps its curvature, which suits
+        a hardening law such as a cubic spring, but its powers can carry a
+        prediction away). ``"linear"``: along their tangent planes at the
+        nearest point of the box, so that where the data did not go the terms
+        grow no faster than linearly (for saturation, friction, or a state,
+        such as a position, that leaves its range without the law changing).
+        The fit is the same whichever is chosen; only predictions beyond the
+        box differ.
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences (PNLSS-I);
         ``predict`` then starts from the fitted ``x0_``.
@@ -240,7 +246,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         "state_terms": [StrOptions(set(STRUCTURES)), "array-like"],
         "output_terms": [StrOptions(set(STRUCTURES)), "array-like"],
         "center": ["boolean"],
-        "extrapolation": [StrOptions({"continue", "linear"})],
+        "extrapolation": [StrOptions({"bounded", "continue", "linear"})],
     }
 
     _label = "PNLSS"
@@ -253,7 +259,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         degree=(2, 3),
         state_terms="full",
         output_terms="full",
-        extrapolation="continue",
+        extrapolation="bounded",
         estimate_x0=False,
         center=True,
         refine_linear=False,

@@ -133,9 +133,11 @@ class BranchTerms(RangedTerms):
         its function is the basis combination; beyond, the function continues
         along its tangent at the nearer end. ``None``: the basis combination
         everywhere.
-    continued : bool, default=False
-        Keep the basis combination beyond ``input_range`` too (the range is
-        then only a record of where the branch inputs went).
+    reach : float, default=1.0
+        The basis combination holds out to ``reach`` times the half-width of
+        ``input_range`` about its centre, the tangents beyond; ``inf``: the
+        basis combination everywhere (the range is then only a record of
+        where the branch inputs went).
     """
 
     evaluate = staticmethod(_evaluate)
@@ -143,7 +145,7 @@ class BranchTerms(RangedTerms):
     parameter_jacobian = staticmethod(_parameter_jacobian)
 
     def __init__(self, n_states, n_inputs, n_outputs, rank, basis, input_range=None,
-                 continued=False):
+                 reach=1.0):
         degrees = basis.degrees
         n_vars, n_fun = n_states + n_inputs, len(degrees)
         self.basis = basis
@@ -154,16 +156,15 @@ class BranchTerms(RangedTerms):
         self.work_size = 4 * rank + 2 * rank * n_fun
         self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
         # The range of the branch inputs heads the work.
-        self._set_range(input_range, continued, rank)
+        self._set_range(input_range, reach, rank)
 
-    def with_input_range(self, values, S, continued=False):
+    def with_input_range(self, values, S, reach=1.0):
         """The same terms with the range that the branch inputs ``V^T s`` take
         at the points ``S = [x; u]`` (``V`` from the parameter blocks
-        ``values``), beyond which they go on along their tangents, or as the
-        basis combination when ``continued``."""
+        ``values``), held out to ``reach`` times its half-width."""
         Z = S @ values["V"]
         return BranchTerms(*self.dimensions, self.rank, self.basis,
-                           np.vstack([Z.min(axis=0), Z.max(axis=0)]), continued)
+                           np.vstack([Z.min(axis=0), Z.max(axis=0)]), reach)
 
     @staticmethod
     def layout(n_states, n_inputs, n_outputs, rank, n_functions):

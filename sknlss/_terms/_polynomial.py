@@ -370,17 +370,19 @@ def _containing(exponents, n_states):
 
 
 # Beyond a box [lower, upper] of the points s (the range that each variable
-# took on the estimation record), the monomials go on along their tangent
-# planes at the nearest point c = clip(s) of the box:
+# took on the estimation record, possibly widened), the monomials go on along
+# their tangent planes at the nearest point c = clip(s) of the box:
 #
 #   m(s) = m(c) + sum_j dm/ds_j(c) (s_j - c_j),
 #
 # whose derivative with respect to a state x_i is dm/dx_i(c) when x_i is
 # clipped, and dm/dx_i(c) + sum_j d2m/dx_i ds_j(c) (s_j - c_j) when it is
-# not. The terms' work array ends with [lower (n_vars), upper (n_vars),
-# c (n_vars), clipped], ``clipped`` telling the state Jacobian whether the
-# point of the last evaluation was outside; an unbounded box leaves every
-# point inside, where nothing else changes.
+# not; or they are held at m(c), whose derivative is dm/dx_i(c) when x_i is
+# not clipped and zero when it is. The terms' work array ends with
+# [lower (n_vars), upper (n_vars), c (n_vars), clipped, held], ``clipped``
+# telling the state Jacobian whether the point of the last evaluation was
+# outside; an unbounded box leaves every point inside, where nothing else
+# changes.
 @njit(cache=True, inline="always")
 def _inside(s, work, o_box):
     n_vars = s.shape[0]
@@ -398,14 +400,21 @@ def _factor(spec, width, row, f):
 
 
 @njit(cache=True)
-def _fill_tangent_monomials(spec, s, work, o_box):
-    """The monomials continued from the nearest point of the box, into work
-    (the powers are those of that point)."""
-    n_vars, n_monomials, width, n_factors = spec[0], spec[1], spec[2], spec[3]
+def _fill_clipped_monomials(spec, s, work, o_box):
+    """The monomials at the nearest point of the box, into work."""
+    n_vars = spec[0]
     o_point = o_box + 2 * n_vars
     for j in range(n_vars):
         work[o_point + j] = min(max(s[j], work[o_box + j]), work[o_box + n_vars + j])
     _fill_monomials(spec, work[o_point : o_point + n_vars], work)
+
+
+@njit(cache=True)
+def _add_tangent_steps(spec, s, work, o_box):
+    """Continue the monomials of :func:`_fill_clipped_monomials` from the
+    box's point to ``s`` along their tangent planes."""
+    n_vars, n_monomials, width, n_factors = spec[0], spec[1], spec[2], spec[3]
+    o_point = o_box + 2 * n_vars
     o_values = n_vars * width
     for k in range(n_monomials):
         row = _HEADER + k * (n_factors + 1)
@@ -419,6 +428,19 @@ def _fill_tangent_monomials(spec, s, work, o_box):
                     if g != f:
                         slope *= work[spec[row + 1 + g]]
                 work[o_values + k] += slope * step
+
+
+@njit(cache=True)
+def _zero_clipped_slopes(spec, s, work, o_box):
+    """Zero the state derivatives of the held monomials along the clipped
+    states."""
+    n_vars, n_monomials, width, n_diff = spec[0], spec[1], spec[2], spec[4]
+    o_point = o_box + 2 * n_vars
+    o_out = n_vars * width + n_monomials
+    for i in range(n_diff):
+        if s[i] != work[o_point + i]:
+            for k in range(n_monomials):
+                work[o_out + k * n_diff + i] = 0.0
 
 
 @njit(cache=True)
@@ -462,7 +484,9 @@ def _evaluate(theta, spec, s, n, h, work):
     outside = not _inside(s, work, o_box)
     work[o_box + 3 * s.shape[0]] = 1.0 if outside else 0.0
     if outside:
-        _fill_tangent_monomials(spec, s, work, o_box)
+        _fill_clipped_monomials(spec, s, work, o_box)
+        if not work[o_box + 3 * s.shape[0] + 1]:
+            _add_tangent_steps(spec, s, work, o_box)
     o_f = n * n_zeta
     for i in range(n):
         acc = 0.0
@@ -500,7 +524,10 @@ def _state_jacobian(theta, spec, s, n, dh_dx, work):
     _fill_derivatives(spec, work)
     o_box = _work_size(spec)
     if work[o_box + 3 * s.shape[0]]:
-        _add_tangent_curvature(spec, s, work, o_box)
+        if work[o_box + 3 * s.shape[0] + 1]:
+            _zero_clipped_slopes(spec, s, work, o_box)
+        else:
+            _add_tangent_curvature(spec, s, work, o_box)
     _sparse_rows(theta, 0, n_zeta, spec, o_zeta, o_zeta_bounds, n, work, o_slopes, dh_dx, 0, n)
     _sparse_rows(theta, n * n_zeta, n_eta, spec, o_eta, o_eta_bounds, n, work, o_slopes,
                  dh_dx, n, dh_dx.shape[0] - n)
@@ -535,9 +562,13 @@ class PolynomialTerms(RangedTerms):
         inside which the monomials are themselves; beyond, they go on along
         their tangent planes at the nearest point of that box. ``None``: the
         monomials everywhere.
-    continued : bool, default=False
-        Keep the monomials beyond ``input_range`` too (the range is then only
-        a record of where the points went).
+    reach : float, default=1.0
+        The monomials hold out to ``reach`` times the half-width of
+        ``input_range`` about its centre; ``inf``: everywhere (the range is
+        then only a record of where the points went).
+    held : bool, default=False
+        Beyond that box, hold the monomials at their value at its nearest
+        point instead of continuing them along their tangent planes.
     """
 
     evaluate = staticmethod(_evaluate)
@@ -545,7 +576,7 @@ class PolynomialTerms(RangedTerms):
     parameter_jacobian = staticmethod(_parameter_jacobian)
 
     def __init__(self, n_states, n_outputs, state_exponents, output_exponents,
-                 input_range=None, continued=False):
+                 input_range=None, reach=1.0, held=False):
         self.exponents = (np.ascontiguousarray(state_exponents, dtype=np.int64),
                           np.ascontiguousarray(output_exponents, dtype=np.int64))
         n_zeta, n_eta = (len(e) for e in self.exponents)
@@ -563,18 +594,24 @@ class PolynomialTerms(RangedTerms):
         starts = len(monomials) + np.cumsum([0] + [len(t) for t in tables[:-1]])
         self.spec = np.concatenate([monomials, *tables, starts[[0, 1, 2, 4]],
                                     [n_zeta, n_eta]]).astype(np.int64)
-        # The box of the tangent continuation, its nearest point and the
-        # clipped flag end the work.
+        # The box, its nearest point and the clipped and held flags end the
+        # work.
         self._range_offset = _work_size(monomials)
-        self.work_size = self._range_offset + 3 * n_vars + 1
-        self._set_range(input_range, continued, n_vars)
+        self.work_size = self._range_offset + 3 * n_vars + 2
+        self._set_range(input_range, reach, n_vars)
+        self.held = bool(held)
         self.n_state_params = n_states * n_zeta
         self.dimensions = (n_states, n_outputs)
 
-    def with_input_range(self, values, S, continued=False):
+    @property
+    def work_init(self):
+        work = super().work_init
+        work[-1] = float(self.held)
+        return work
+
+    def with_input_range(self, values, S, reach=1.0, held=False):
         """The same terms with the box that the points ``S = [x; u]`` fill,
-        beyond which the monomials go on along their tangent planes, or as
-        themselves when ``continued`` (``values``, the parameter blocks, are
-        not needed: the box holds the points themselves)."""
+        held out to ``reach`` times its half-width (``values``, the parameter
+        blocks, are not needed: the box holds the points themselves)."""
         return PolynomialTerms(*self.dimensions, *self.exponents,
-                               np.vstack([S.min(axis=0), S.max(axis=0)]), continued)
+                               np.vstack([S.min(axis=0), S.max(axis=0)]), reach, held)
