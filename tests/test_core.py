@@ -174,6 +174,16 @@ def test_held_monomials_keep_their_value_on_the_box():
     np.testing.assert_allclose(Y, expected, rtol=1e-12, atol=1e-12)
 
 
+@settings(max_examples=25, deadline=None)
+@given(gain=st.floats(1.0, 1e4), seed=st.integers(0, 2**16))
+def test_held_terms_keep_a_stable_model_bounded_on_any_input(gain, seed):
+    model, theta = _model("polynomial-held", DIMS["MIMO"], seed=seed)
+    U, starts = _data(2, seed=seed)
+    Y, X, diverged = model.simulate(theta, gain * U, starts)
+    assert not diverged
+    assert np.all(np.isfinite(Y)) and np.all(np.isfinite(X))
+
+
 def test_divergence_rule_on_states_and_outputs():
     n_u = 1
     model = StateSpaceModel(2, n_u, 1)
