@@ -88,10 +88,20 @@ class RangedTerms(Terms):
         terms are themselves inside the box of ``reach`` times the range's
         half-width about its centre; ``reach=inf``: everywhere (the range is
         then only a record of where their inputs went)."""
-        if input_range is None:
+        unbounded = input_range is None
+        if unbounded:
             input_range = _UNBOUNDED.repeat(n_ranged, axis=1)
         self.input_range = np.asarray(input_range, dtype=np.float64)
         self.reach = float(reach)
+        if self.continued:
+            self._box = _UNBOUNDED.repeat(n_ranged, axis=1)
+        elif unbounded or self.reach == 1.0:
+            self._box = self.input_range
+        else:
+            centre = self.input_range.mean(axis=0)
+            half_width = np.ptp(self.input_range, axis=0) / 2
+            self._box = np.vstack([centre - self.reach * half_width,
+                                   centre + self.reach * half_width])
 
     @property
     def continued(self):
@@ -103,18 +113,8 @@ class RangedTerms(Terms):
         """The work array with the box beyond which the terms go on otherwise
         (unbounded when they are continued)."""
         work = np.zeros(self.work_size)
-        n_ranged = self.input_range.shape[1]
-        if self.continued:
-            bounds = _UNBOUNDED
-        elif self.reach == 1.0:
-            bounds = self.input_range
-        else:
-            centre = self.input_range.mean(axis=0)
-            half_width = np.ptp(self.input_range, axis=0) / 2
-            bounds = np.vstack([centre - self.reach * half_width,
-                                centre + self.reach * half_width])
         start = self._range_offset
-        work[start : start + 2 * n_ranged] = np.broadcast_to(bounds, (2, n_ranged)).ravel()
+        work[start : start + self._box.size] = self._box.ravel()
         return work
 
 
