@@ -528,7 +528,7 @@ def with_linear_part(model, linear):
 
 #: How each named extrapolation continues the terms beyond the range of their
 #: inputs (see ``RangedTerms``; "bounded" is for polynomial terms only).
-_CONTINUATIONS = {"linear": {}, "continue": {"reach": np.inf},
+_CONTINUATIONS = {"linear": {"reach": 1.0}, "continue": {"reach": np.inf},
                   "bounded": {"reach": 2.0, "held": True}}
 
 

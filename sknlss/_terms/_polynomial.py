@@ -559,9 +559,9 @@ class PolynomialTerms(RangedTerms):
         Exponents of zeta and eta, shapes (n_zeta, n_vars) and (n_eta, n_vars).
     input_range : ndarray of shape (2, n_vars), default=None
         Lower and upper ends of the range of each variable of ``s = [x; u]``
-        inside which the monomials are themselves; beyond, they go on along
-        their tangent planes at the nearest point of that box. ``None``: the
-        monomials everywhere.
+        around which the monomials are themselves (see ``reach``); beyond,
+        they go on along their tangent planes at the nearest point of that
+        box, or are held there (``held``). ``None``: the monomials everywhere.
     reach : float, default=1.0
         The monomials hold out to ``reach`` times the half-width of
         ``input_range`` about its centre; ``inf``: everywhere (the range is
