@@ -13,6 +13,7 @@ from sknlss import (
     NLLFRRegressor,
     PolynomialBasis,
 )
+from sknlss._estimators import _nllfr
 from sknlss.exceptions import SimulationDivergedWarning
 from sknlss.metrics import rms_error
 
@@ -171,6 +172,27 @@ def test_a_single_start_uses_the_powers(records):
     model = NLLFRRegressor(n_states=2, n_init=1, max_iter=3).fit(u, y)
     assert model.basis_ == PolynomialBasis(3)
     assert len(model.start_losses_) == 1
+
+
+def test_random_starts_keep_the_best_of_their_screened_directions(records, monkeypatch):
+    # Before any iteration, a random start's error is at most that of its
+    # first draw alone (the screen keeps the best least-squares start of its
+    # draws); the start along the outputs is not screened.
+    u, y, _, _ = records
+    options = dict(n_states=2, basis=LegendreBasis(3), max_iter=0, n_init=3,
+                   validation_fraction=0.0)
+
+    def start_losses():
+        return [NLLFRRegressor(random_state=random_state, **options).fit(u, y).start_losses_
+                for random_state in range(3)]
+
+    screened = start_losses()
+    monkeypatch.setattr(_nllfr, "_SCREENED_DIRECTIONS", 1)
+    single = start_losses()
+    for kept, first in zip(screened, single):
+        assert kept[0] == first[0]
+        assert np.all(kept[1:] <= first[1:])
+    assert any(np.any(kept[1:] < first[1:]) for kept, first in zip(screened, single))
 
 
 @pytest.mark.parametrize("basis", [PolynomialBasis(3), LegendreBasis(3)])

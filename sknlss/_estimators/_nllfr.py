@@ -46,6 +46,12 @@ from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
 #: the powers alone.
 _DEFAULT_BASES = (PolynomialBasis(3), LegendreBasis(3))
 
+#: Random branch directions that each start but the first draws, keeping the
+#: one whose least-squares start simulates best: a single draw often starts a
+#: bounded basis in a poor basin (closed-loop drive), and the screen costs
+#: one linear regression and one simulation per draw.
+_SCREENED_DIRECTIONS = 20
+
 # Relative ridge of the least squares of the initialisation: it only keeps
 # the regression defined when basis functions are nearly collinear.
 _RIDGE = 1e-8
@@ -87,21 +93,27 @@ def _branch_inputs(V, S, rows):
     return V, S @ V
 
 
-def _least_squares_terms(problem, theta, V):
+def _linear_trajectory(problem, theta):
+    """States and inputs ``[x, u]`` and outputs of the linear model ``theta``
+    (its terms switched off) along the estimation record."""
+    Y_lin, X_lin, _ = problem.simulate(theta)
+    return np.hstack([X_lin, problem.U]), Y_lin
+
+
+def _least_squares_terms(problem, theta, V, trajectory):
     """Output directions W and basis coefficients for fixed branch directions V.
 
-    Along the linear model's trajectory (parameters ``theta``), basis function
-    ``m`` of branch ``l`` enters state ``i`` through the linear dynamics and
-    output ``j`` directly; the output error of the linear model is regressed
-    on these responses, and each branch's block of products ``W[:, l] c[l]``
-    is factored by its best rank-one approximation.
+    Along the linear model's ``trajectory`` (parameters ``theta``), basis
+    function ``m`` of branch ``l`` enters state ``i`` through the linear
+    dynamics and output ``j`` directly; the output error of the linear model
+    is regressed on these responses, and each branch's block of products
+    ``W[:, l] c[l]`` is factored by its best rank-one approximation.
     """
     model = problem.model
     n, n_y = model.n_states, model.n_outputs
     basis = model.terms.basis
     values = model.unpack(theta)
-    Y_lin, X_lin, _ = problem.simulate(theta)
-    S = np.hstack([X_lin, problem.U])
+    S, Y_lin = trajectory
     rows = problem.fit_rows
     V, Z = _branch_inputs(V, S, rows)
     rank, n_fun = V.shape[1], basis.n_functions
@@ -537,24 +549,39 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         per_branch = 2 if isinstance(model.terms.basis, PolynomialBasis) else 1
         return model.n_states**2 + per_branch * self.n_branches
 
-    def _directions(self, context, start, seed):
-        """Branch directions V of a start: along the outputs of the linear
-        model first (for the first start), random otherwise."""
-        model = context["model"]
+    def _start_terms(self, context, start, seed):
+        """Branch directions of a start and its least-squares terms.
+
+        The first start's branch inputs lie along the outputs of the linear
+        model. Each other start takes the best of ``_SCREENED_DIRECTIONS``
+        random directions by the simulation error of its least-squares start.
+
+        Returns the drawn directions and the ``(V, W, coefficients)`` of the
+        start, V scaled to the range of the branch inputs.
+        """
+        problem, model, theta = context["problem"], context["model"], context["theta"]
         n, n_u = model.n_states, model.n_inputs
-        values = model.unpack(context["theta"])
+        values = model.unpack(theta)
+        trajectory = _linear_trajectory(problem, theta)
         rng = check_random_state(seed)
-        V = rng.standard_normal((n + n_u, self.n_branches))
-        if start == 0:
-            along_outputs = np.hstack([values["C"], values["D"]]).T
-            k = min(self.n_branches, along_outputs.shape[1])
-            V[:, :k] = along_outputs[:, :k]
-        return V
+        best, best_loss = None, np.inf
+        for _ in range(1 if start == 0 else _SCREENED_DIRECTIONS):
+            directions = rng.standard_normal((n + n_u, self.n_branches))
+            if start == 0:
+                along_outputs = np.hstack([values["C"], values["D"]]).T
+                k = min(self.n_branches, along_outputs.shape[1])
+                directions[:, :k] = along_outputs[:, :k]
+            terms = _least_squares_terms(problem, theta, directions, trajectory)
+            V, W, c = terms
+            loss = (problem.fit_loss(model.pack(dict(values, V=V, W=W, coefficients=c)))
+                    if start else 0.0)
+            if best is None or loss < best_loss:
+                best, best_loss = (directions, terms), loss
+        return best
 
     def _starting_points(self, context, start, seed):
         problem, model = context["problem"], context["model"]
-        directions = self._directions(context, start, seed)
-        V, W, c = _least_squares_terms(problem, context["theta"], directions)
+        directions, (V, W, c) = self._start_terms(context, start, seed)
         values = model.unpack(context["theta"])
         theta = model.pack(dict(values, V=V, W=W, coefficients=c))
         # With weaker feedback the model is closer to the (stable) linear one;
