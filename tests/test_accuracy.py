@@ -45,8 +45,8 @@ def test_silverbox_pnlss(silverbox):
 def test_silverbox_nllfr(silverbox):
     """Silverbox, NL-LFR with ``n_states=2`` and its defaults, 17 parameters.
 
-    Over random states 0-9 the benchmark measured 0.2539 mV [0.2537, 0.2541]
-    on the multisine and 0.3645 mV [0.3644, 0.3660] on the full arrow (each
+    Over random states 0-9 the benchmark measured 0.2541 mV [0.2537, 0.2541]
+    on the multisine and 0.3660 mV [0.3644, 0.3660] on the full arrow (each
     record's state set from its first 50 samples). The multisine bound is the
     target, 0.29 mV (the frequency-domain NL-LFR recipe of freq-statespace
     reaches 0.288 mV), with a margin of about a hundred times the spread. The
