@@ -15,7 +15,7 @@ from sknlss._estimators._bla import fit_linear_model
 from sknlss._linear._frf import LPM_POWER_THRESHOLD
 from sknlss._linear._realization import pole_radius_limit
 from sknlss.datasets import (make_bouc_wen, make_cascaded_tanks, make_closed_loop_drive,
-                             make_pnlss_reference)
+                             make_pnlss_reference, make_wiener_hammerstein)
 from sknlss.metrics import nrmse, rms_error
 from sknlss.signals import multisine
 
@@ -266,13 +266,46 @@ def test_bad_input():
         BLAEstimator(lpm_bandwidth=20).fit(X[:30], y[:30])
     with pytest.raises(ValueError, match="too large"):
         BLAEstimator(n_states=8).fit(X[:12], y[:12])
-    with pytest.raises(ValueError, match="no sample|too short"):
+    with pytest.raises(ValueError, match=r"2 after n_transient=10: the Local Polynomial "
+                                         r"Method needs at least 3"):
         BLAEstimator(n_transient=10).fit(X[:12], y[:12])
     # A sequence shorter than n_transient is named by its rows.
     short = np.repeat([0, 1, 2], [100, 30, 100])
     with pytest.raises(ValueError, match=r"sequence of rows 100 to 129 \(sequence_id\) has "
                                          r"30 sample\(s\), 0 after n_transient=50"):
         BLAEstimator(n_transient=50).fit(X[:230], y[:230], sequence_id=short)
+
+
+def test_sequences_too_short_for_the_lpm():
+    X, y, _, _ = _periodic_records(period=128, n_realizations=4)
+    X, y = X[:1000], y[:1000]
+    # Two samples hold no frequency bin: the error names the sequence.
+    two = np.repeat([0, 1], [998, 2])
+    with pytest.raises(ValueError, match=r"sequence of rows 998 to 999 \(sequence_id\) has "
+                                         r"2 sample\(s\).*at least 3 per sequence"):
+        BLAEstimator().fit(X, y, sequence_id=two)
+    # A few samples give an FRF without a variance: it is left out, with a
+    # warning, instead of leaving every estimate unweighted.
+    alone = BLAEstimator(n_states=4).fit(X[:996], y[:996])
+    four = np.repeat([0, 1], [996, 4])
+    with pytest.warns(UserWarning, match=r"1 sequence\(s\) too short for a variance.*"
+                                         r"rows 996 to 999"):
+        both = BLAEstimator(n_states=4).fit(X, y, sequence_id=four)
+    assert both.total_variance_ is not None
+    np.testing.assert_allclose(both.frf_, alone.frf_, rtol=1e-6)
+
+
+def test_initial_state_after_a_long_transient_stays_bounded():
+    # After n_transient samples, the fast modes of a Wiener-Hammerstein
+    # chain no longer show in the cost rows: the least-squares initial state
+    # leaves them out instead of fitting the noise with states of 1e7 and more.
+    for random_state in (0, 3):
+        data = make_wiener_hammerstein(n_samples=1000, n_test_samples=600,
+                                       random_state=random_state)
+        bla = BLAEstimator(n_states=4, n_transient=90, estimate_x0=True).fit(
+            data.X_est, data.y_est)
+        assert np.max(np.abs(bla.x0_)) < 10.0
+        assert bla.score(data.X_est, data.y_est) > 0.95
 
 
 def test_mimo_single_record_lpm():

@@ -41,6 +41,8 @@ _RELATIVE_VARIANCE_FLOOR = 1e-12
 _ABSOLUTE_VARIANCE_FLOOR = np.finfo(float).eps ** 2
 # Normalised RMS error of a simulation as poor as the output's mean.
 _MEAN_LEVEL = 1.0
+# Samples of the shortest record that has a frequency bin below Nyquist.
+_LPM_MIN_SAMPLES = 3
 # Relative window power of the LPM's second model (see _fit_linear_model).
 _STRICT_POWER_THRESHOLD = 1e-2
 
@@ -103,6 +105,13 @@ class LinearFit:
     simulation_error: float
 
 
+def _rows(starts, k):
+    """How an error names sequence ``k``."""
+    if len(starts) == 2:
+        return "The record (X, y)"
+    return f"The sequence of rows {starts[k]} to {starts[k + 1] - 1} (sequence_id)"
+
+
 def _frf_method(params):
     if params["method"] == "auto":
         return "lpm" if params["period"] is None else "robust"
@@ -120,18 +129,27 @@ def _nonparametric(U, Y, starts, params):
         return [robust_frf(U, Y, starts, period, n_transient=n_transient,
                            max_frequency=params["max_frequency"])]
     lengths = np.diff(starts)
-    if lengths.min() - n_transient < 2:
+    if lengths.min() - n_transient < _LPM_MIN_SAMPLES:
         k = int(np.argmin(lengths))
-        which = ("The record (X, y)" if lengths.size == 1 else
-                 f"The sequence of rows {starts[k]} to {starts[k + 1] - 1} (sequence_id)")
         raise ValueError(
-            f"{which} has {lengths[k]} sample(s), {max(lengths[k] - n_transient, 0)} "
-            f"after n_transient={n_transient}: the Local Polynomial Method needs at "
-            "least 2 per sequence. Lower n_transient or leave that sequence out."
+            f"{_rows(starts, k)} has {lengths[k]} sample(s), "
+            f"{max(lengths[k] - n_transient, 0)} after n_transient={n_transient}: the "
+            f"Local Polynomial Method needs at least {_LPM_MIN_SAMPLES} per sequence (one "
+            "frequency bin). Lower n_transient or leave that sequence out."
         )
     records = lpm_records(U, Y, starts, order=params["lpm_order"],
                           bandwidth=params["lpm_bandwidth"], n_transient=n_transient,
                           max_frequency=params["max_frequency"])
+    without_variance = [k for k, record in enumerate(records) if record[2] is None]
+    if 0 < len(without_variance) < len(records):
+        # An estimate whose variance is unknown cannot be weighted against the
+        # others; unweighted, its few bins would decide the fit.
+        rows = ", ".join(f"{starts[k]} to {starts[k + 1] - 1}" for k in without_variance)
+        warnings.warn(
+            f"{len(without_variance)} sequence(s) too short for a variance estimate of "
+            f"the Local Polynomial Method (sequence_id; rows {rows}) are left out of the "
+            "nonparametric FRF.", UserWarning, stacklevel=2)
+        records = [record for k, record in enumerate(records) if k not in without_variance]
     return [lpm_estimate(records, threshold)
             for threshold in (LPM_POWER_THRESHOLD, _STRICT_POWER_THRESHOLD)]
 
