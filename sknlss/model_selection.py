@@ -266,7 +266,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         check_is_fitted(self)
         return self.best_estimator_.predict(X, sequence_id=sequence_id, x0=x0)
 
-    def score(self, X, y, *, sequence_id=None):
+    def score(self, X, y, sample_weight=None, *, sequence_id=None):
         """R² of the selected model's simulated output (see its ``score``).
 
         Parameters
@@ -275,6 +275,8 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
             Input signal.
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output.
+        sample_weight : array-like of shape (n_samples,), default=None
+            Weight of each sample in the R².
         sequence_id : array-like of shape (n_samples,), default=None
             Sequence labels.
 
@@ -283,7 +285,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         score : float
         """
         check_is_fitted(self)
-        return self.best_estimator_.score(X, y, sequence_id=sequence_id)
+        return self.best_estimator_.score(X, y, sample_weight, sequence_id=sequence_id)
 
     def estimate_initial_state(self, X, y, *, x0=None, max_iter=100):
         """Initial state of the selected model that fits a record's first

@@ -249,6 +249,19 @@ def test_score_skips_transient(data):
         _FirstOrder(n_transient=50).fit(X, y).score(X, y)
 
 
+def test_score_weights_the_samples(data):
+    X, y = data
+    model = _FirstOrder(n_transient=5).fit(X, y)
+    y_pred = model.predict(X)
+    y_true = y_pred + 0.1 * np.sin(np.arange(50))
+    weight = np.linspace(0.0, 2.0, 50)
+    assert model.score(X, y_true, weight) == pytest.approx(
+        r2_score(y_true[5:], y_pred[5:], sample_weight=weight[5:]))
+    assert model.score(X, y_true, np.ones(50)) == pytest.approx(model.score(X, y_true))
+    with pytest.raises(ValueError, match="sample_weight"):
+        model.score(X, y_true, np.ones(49))
+
+
 def test_n_transient_validated(data):
     X, y = data
     with pytest.raises(ValueError, match="n_transient"):

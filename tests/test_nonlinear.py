@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
+from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
 from sknlss import (
@@ -95,6 +96,22 @@ def test_steady_state_and_frequency_cost(name, periodic):
     one = model.predict(X[:period])
     two = model.predict(np.vstack([X[:period], X[:period]]))
     np.testing.assert_allclose(one, two[period:], atol=1e-8)
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_a_given_initial_state_starts_a_periodic_model(name, periodic):
+    X, y, sequence_id, period = periodic
+    model = FACTORIES[name](n_states=2, period=period, n_transient=period,
+                            n_init=1).fit(X, y, sequence_id=sequence_id)
+    x0 = np.array([0.5, -0.3])
+    # A record of whole periods starts from x0 as any other record does.
+    whole = model.predict(X[:period], x0=x0)
+    longer = model.predict(X[:period + 1], x0=x0)
+    np.testing.assert_allclose(whole, longer[:period], rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match=r"held-out end of every sequence must be a whole "
+                                         r"number of periods: validation_fraction=0.25 "
+                                         r"holds out 96"):
+        clone(model).set_params(validation_fraction=0.25).fit(X, y, sequence_id=sequence_id)
 
 
 @pytest.mark.parametrize("name", FACTORIES)

@@ -204,6 +204,20 @@ def test_center_makes_model_offset_invariant():
     assert raw.u_scale_ == pytest.approx((u + 3.0).std())
 
 
+def test_a_model_worse_than_the_mean_warns():
+    # Uncentred, a large output offset is left to the dynamics, which cannot
+    # produce it from an input of zero mean: the fit says so.
+    rng = np.random.default_rng(0)
+    u = 0.2 * rng.normal(size=(300, 1))
+    y = _quadratic_system(u) + 50.0
+    model = PNLSSRegressor(1, degree=2, center=False, max_iter=10, n_init=2)
+    with pytest.warns(UserWarning, match=r"worse than the output's mean.*Try center=True"):
+        _fit_quiet(model, u, y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        _fit_quiet(clone(model).set_params(center=True), u, y)
+
+
 def test_refine_linear_starts_from_a_better_linear_model():
     rng = np.random.default_rng(0)
     u = 0.2 * rng.normal(size=(300, 1))

@@ -37,7 +37,8 @@ def sequence_bounds(sequence_id, n_samples):
             ids = ids.astype(np.int64)
         else:
             raise ValueError(
-                f"sequence_id must hold integer labels, got dtype {ids.dtype}."
+                "sequence_id must hold integer labels (whole numbers, also as floats); "
+                f"got dtype {ids.dtype} with values that are not whole numbers."
             )
     change = np.flatnonzero(ids[1:] != ids[:-1]) + 1
     starts = np.concatenate(([0], change, [n_samples])).astype(np.int64)

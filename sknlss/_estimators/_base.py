@@ -21,6 +21,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.metrics import r2_score
 from sklearn.utils._param_validation import validate_params
 from sklearn.utils.validation import (
+    _check_sample_weight,
     check_array,
     check_consistent_length,
     check_is_fitted,
@@ -191,8 +192,12 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """The fitted model: a :class:`~sknlss._core._model.StateSpaceModel`
         and its parameter vector."""
 
-    def _simulate_normalized(self, U, starts, x0):
+    def _simulate_normalized(self, U, starts, x0, steady_state=False):
         """Simulate from initial states ``x0`` of shape (n_sequences, n_states).
+
+        ``steady_state`` lets a model fitted on periodic data start each
+        whole-period sequence in its periodic steady state instead (the
+        initial states then only start the prepended samples).
 
         Returns the normalised outputs (n_samples, n_outputs), the states
         (n_samples, n_states) and a flag telling whether a trajectory diverged.
@@ -233,8 +238,12 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         sequence_id : array-like of shape (n_samples,), default=None
             Sequence labels; each sequence starts from its own initial state.
         x0 : array-like of shape (n_states,) or (n_sequences, n_states), default=None
-            Initial state in the model's (normalised) state coordinates.
-            ``None`` uses the fitted ``x0_`` (zero unless it was estimated).
+            Initial state in the model's (normalised) state coordinates; with
+            one row per sequence, row ``k`` starts the ``k``-th sequence in the
+            order of the rows of ``X`` (not in the sorted order of the labels).
+            ``None`` uses the fitted ``x0_`` (zero unless it was estimated);
+            a nonlinear model fitted with ``period`` and ``n_transient`` then
+            starts every whole-period sequence in its periodic steady state.
         return_states : bool, default=False
             Also return the simulated states.
 
@@ -249,9 +258,11 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         with naming("X"):
             X = validate_data(self, X, reset=False, dtype=np.float64)
         starts = sequence_bounds(sequence_id, X.shape[0])
+        # A state the user passes starts the simulation, periodic data or not.
+        steady_state = x0 is None
         x0 = self._initial_states(x0, len(starts) - 1)
         U = _normalised(X, self.u_offset_, self.u_scale_)
-        Yn, states, diverged = self._simulate_normalized(U, starts, x0)
+        Yn, states, diverged = self._simulate_normalized(U, starts, x0, steady_state)
         with np.errstate(over="ignore", invalid="ignore"):
             Y = self.y_offset_ + self.y_scale_ * Yn
         # Outputs beyond the floating-point range in the user's units (from
@@ -281,7 +292,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         sequence_id : array-like of shape (n_samples,), default=None
             Sequence labels; ``None`` simulates all rows as one sequence.
         x0 : array-like of shape (n_states,) or (n_sequences, n_states), default=None
-            Initial state; ``None`` uses the fitted ``x0_``.
+            Initial state; ``None`` uses the fitted ``x0_`` (see
+            :meth:`simulate`).
 
         Returns
         -------
@@ -346,7 +358,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
                                  _normalised(Y, self.y_offset_, self.y_scale_), start,
                                  max_iter=max_iter)
 
-    def score(self, X, y, *, sequence_id=None):
+    def score(self, X, y, sample_weight=None, *, sequence_id=None):
         """R² of the simulated output, skipping ``n_transient`` samples per sequence.
 
         Parameters
@@ -355,6 +367,9 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Input signal.
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output.
+        sample_weight : array-like of shape (n_samples,), default=None
+            Weight of each sample in the R² (the simulation runs over all
+            samples whatever their weight).
         sequence_id : array-like of shape (n_samples,), default=None
             Sequence labels.
 
@@ -381,10 +396,14 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             raise ValueError(
                 f"n_transient={self.n_transient} leaves no sample to score."
             )
+        if sample_weight is not None:
+            with naming("sample_weight"):
+                sample_weight = _check_sample_weight(sample_weight, y)[keep]
         y_pred = y_pred[keep]
         if not np.all(np.isfinite(y_pred)):
             return -np.inf
         # R² does not change under a scaling of each output; in normalised
         # units its sums of squares cannot overflow.
         return r2_score(_normalised(y[keep], self.y_offset_, self.y_scale_),
-                        _normalised(y_pred, self.y_offset_, self.y_scale_))
+                        _normalised(y_pred, self.y_offset_, self.y_scale_),
+                        sample_weight=sample_weight)

@@ -38,11 +38,13 @@ from .._core._memory import check_memory
 from .._core._model import StateSpaceModel
 from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
-from .._core._sequences import holdout_masks, part_before_holdout, steady_state_rows
+from .._core._sequences import (holdout_masks, part_before_holdout, steady_state_rows,
+                                transient_mask)
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import LinearFallbackWarning
+from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
-from ._bla import BLAEstimator, fit_linear_model, fitted_bla
+from ._bla import _MEAN_LEVEL, BLAEstimator, fit_linear_model, fitted_bla
 
 
 #: Held-out shares of the end of every sequence given to the starts in turn
@@ -173,6 +175,18 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     f"With period={self.period}, every sequence must hold a whole number "
                     f"of periods; got sequence lengths {lengths.tolist()}."
                 )
+            if self.validation_fraction != "auto":
+                held_out = np.round(float(self.validation_fraction) * lengths).astype(int)
+                if np.any(held_out % self.period):
+                    k = int(np.argmax(held_out % self.period))
+                    raise ValueError(
+                        f"With period={self.period}, the held-out end of every sequence "
+                        f"must be a whole number of periods: validation_fraction="
+                        f"{self.validation_fraction!r} holds out {held_out[k]} of the "
+                        f"{lengths[k]} samples of a sequence. Use a fraction that holds "
+                        "out whole periods, or 0 (hold out whole periods or realizations "
+                        "as a separate record)."
+                    )
 
     def _linear_start(self, U, Y, starts, fit_mask):
         """The linear part and initial state the nonlinear model starts from:
@@ -282,15 +296,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
                                  validation_fraction=min(self._row_shares(shares)),
                                  steady_state_period=self.period).fit_rows.sum())
-        # The stability penalty has a row per fitted sample at most.
-        n_rows = (n_samples * n_y + (n_samples if self.stability_penalty else 0)
-                  + (n_terms if self.weight_decay else 0))
+        # The stability penalty has a row per fitted sample at most, the weight
+        # decay one per term parameter.
+        n_penalty = ((n_samples if self.stability_penalty else 0)
+                     + (n_terms if self.weight_decay else 0))
         concurrent = min(self.n_init, effective_n_jobs(self.n_jobs))
         check_memory(
-            8 * n_rows * n_params * _JACOBIAN_COPIES * concurrent,
+            8 * (n_samples * n_y + n_penalty) * n_params * _JACOBIAN_COPIES * concurrent,
             f"{type(self).__name__}({self._structure()}) has {n_params:,} parameters; "
-            f"its fit on {n_samples * n_y:,} cost values ({_JACOBIAN_COPIES} copies of "
-            f"the rows x parameters Jacobian, {concurrent} start(s) at a time)",
+            f"its fit on {n_samples * n_y:,} cost values and {n_penalty:,} penalty rows "
+            f"(stability_penalty, weight_decay; {_JACOBIAN_COPIES} copies of the rows x "
+            f"parameters Jacobian, {concurrent} start(s) at a time)",
             "Use a smaller model or a shorter record.")
 
     def _underdetermined(self, problem):
@@ -378,6 +394,29 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self._set_terms(values)
         self.n_params_ = int(model.n_params)
         self._set_search_result(result)
+        self._warn_if_worse_than_the_mean(U, Y, starts)
+
+    def _warn_if_worse_than_the_mean(self, U, Y, starts):
+        """Warn when the fitted model simulates its estimation record worse than
+        the output's mean: such a model should not be taken silently."""
+        x0 = np.tile(self.x0_, (len(starts) - 1, 1))
+        Y_model, _, diverged = self._simulate_normalized(U, starts, x0, steady_state=True)
+        # Periodic records are simulated in steady state: all their rows count.
+        rows = transient_mask(starts, 0 if self.period is not None else self.fit_transient_)
+        if not rows.any():
+            return
+        error = np.inf if diverged else float(np.max(
+            nrmse(Y[rows], Y_model[rows], multioutput="raw_values")))
+        if error <= _MEAN_LEVEL:
+            return
+        remedy = ("center=True: with center=False the model has to produce the signals' "
+                  "offsets through its dynamics" if not self._centred() else
+                  "a look at bla_, the linear model it starts from")
+        warnings.warn(
+            f"{type(self).__name__}({self._structure()}) simulates its estimation record "
+            f"worse than the output's mean (normalised RMS error {error:.3g}; "
+            f"fell_back_to_linear_={self.fell_back_to_linear_}). Try {remedy}.",
+            UserWarning, stacklevel=5)
 
     def _search(self, problem_sets, shares, theta, U, Y, starts):
         """The starts from the linear start ``theta``, each refined on the
@@ -492,9 +531,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values.update(self._terms_values())
         return self._model, self._model.pack(values)
 
-    def _simulate_normalized(self, U, starts, x0):
+    def _simulate_normalized(self, U, starts, x0, steady_state=False):
         lengths = np.diff(starts)
-        if self.period is None or self.n_transient == 0 or np.any(lengths % self.period):
+        if (not steady_state or self.period is None or self.n_transient == 0
+                or np.any(lengths % self.period)):
             return super()._simulate_normalized(U, starts, x0)
         # Periodic data: every sequence starts in steady state, as in the fit.
         index, sim_starts, original = steady_state_rows(starts, self.n_transient)
