@@ -1,15 +1,19 @@
 """Command line: ``python -m sknlss reproduce`` runs the benchmark reproductions.
 
-A thin layer over :func:`sknlss.benchmarks.reproduce`: every model is fitted on
-the estimation record only, with the estimators' defaults and the model
-structure of the paper, at several random states; the tables give the median
-and the range of the test errors.
+A thin layer over :func:`sknlss.benchmarks.reproduce`; its help text says what
+the command does.
 """
 
 import argparse
 import sys
 
 from .benchmarks import BENCHMARKS, reproduce
+
+_DESCRIPTION = (
+    "Fit every model on the estimation record of each benchmark only, with the "
+    "estimators' defaults and the model structure of the paper, at several random "
+    "states, and print the median and the range of the test errors."
+)
 
 
 def main(argv=None):
@@ -30,7 +34,7 @@ def main(argv=None):
     commands = parser.add_subparsers(dest="command", required=True)
     command = commands.add_parser(
         "reproduce", help="fit the models on the benchmarks and print their errors",
-        description=__doc__)
+        description=_DESCRIPTION)
     command.add_argument("--benchmark", choices=sorted(BENCHMARKS) + ["all"], default="all",
                          help="which benchmark to run (default: %(default)s)")
     command.add_argument("--random-states", type=int, nargs="+", default=[0, 1, 2],

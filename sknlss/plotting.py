@@ -470,8 +470,9 @@ def plot_error_spectrum(y_true, y_pred, *, noise_level=None, sampling_time=None,
     noise_level : float or array-like of shape (n_samples // 2,), default=None
         Noise level to draw: a float is the standard deviation of white output
         noise (in output units), drawn as a horizontal line; an array gives
-        the noise spectrum per frequency bin, on the same scale as the plotted
-        spectra. None draws no noise level.
+        the noise spectrum per frequency bin as magnitudes
+        ``|DFT| / sqrt(n_samples)`` in output units (not in dB: the plot
+        converts it like the spectra). None draws no noise level.
     sampling_time : float, default=None
         Sampling time in seconds; frequencies are in Hz when given, otherwise
         in cycles per sample.
