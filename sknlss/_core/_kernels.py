@@ -39,6 +39,10 @@ space):
   ``output_offset < 0`` means the output rows are not needed. It is called
   after the two others at the same point.
 
+Terms without parameters are zero: ``simulate`` then skips their call, which
+costs more than the arithmetic of a small linear model (the BLA, the
+responses of the NL-LFR initialisation, initial-state regressions).
+
 The compiled helpers these functions call at every sample are declared
 ``inline="always"``: a call that LLVM leaves out of line (a helper with
 several branches, such as the basis functions) costs tens of nanoseconds,
@@ -221,7 +225,8 @@ def simulate(theta, n_outputs, n_terms, spec, work_init, U, starts, x0, evaluate
     # to the bit (writing Y[t, i] in the helper instead of the row Y[t]
     # measured 12 % slower).
     s = np.empty(n + n_u)
-    h = np.empty(n + n_y)
+    # Zero for terms without parameters, whose call is skipped (see above).
+    h = np.zeros(n + n_y)
     work = work_init.copy()
     x_next = np.empty(n)
     diverged = False
@@ -234,7 +239,8 @@ def simulate(theta, n_outputs, n_terms, spec, work_init, U, starts, x0, evaluate
             if not failed:
                 for j in range(n_u):
                     s[n + j] = U[t, j]
-                evaluate(theta_terms, spec, s, n, h, work)
+                if n_terms > 0:
+                    evaluate(theta_terms, spec, s, n, h, work)
                 failed = _step(A, B, C, D, h, s, x_next, Y[t])
             if failed:
                 Y[t:end] = np.nan
