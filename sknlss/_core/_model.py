@@ -96,6 +96,7 @@ class RangedTerms(Terms):
         if self.continued:
             self._box = _UNBOUNDED.repeat(n_ranged, axis=1)
         elif unbounded or self.reach == 1.0:
+            # The range itself, exactly (centre and half-width would round it).
             self._box = self.input_range
         else:
             centre = self.input_range.mean(axis=0)

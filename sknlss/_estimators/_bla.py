@@ -105,11 +105,16 @@ class LinearFit:
     simulation_error: float
 
 
+def _span(starts, k):
+    """The rows of sequence ``k``, for messages."""
+    return f"{starts[k]} to {starts[k + 1] - 1}"
+
+
 def _rows(starts, k):
     """How an error names sequence ``k``."""
     if len(starts) == 2:
         return "The record (X, y)"
-    return f"The sequence of rows {starts[k]} to {starts[k + 1] - 1} (sequence_id)"
+    return f"The sequence of rows {_span(starts, k)} (sequence_id)"
 
 
 def _frf_method(params):
@@ -144,7 +149,7 @@ def _nonparametric(U, Y, starts, params):
     if 0 < len(without_variance) < len(records):
         # An estimate whose variance is unknown cannot be weighted against the
         # others; unweighted, its few bins would decide the fit.
-        rows = ", ".join(f"{starts[k]} to {starts[k + 1] - 1}" for k in without_variance)
+        rows = ", ".join(_span(starts, k) for k in without_variance)
         warnings.warn(
             f"{len(without_variance)} sequence(s) too short for a variance estimate of "
             f"the Local Polynomial Method (sequence_id; rows {rows}) are left out of the "

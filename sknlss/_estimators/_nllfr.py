@@ -574,17 +574,17 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         values = model.unpack(theta)
         trajectory = _linear_trajectory(problem, theta)
         rng = check_random_state(seed)
-        best, best_loss = None, np.inf
-        for _ in range(1 if start == 0 else _SCREENED_DIRECTIONS):
+        if start == 0:
             directions = rng.standard_normal((n + n_u, self.n_branches))
-            if start == 0:
-                along_outputs = np.hstack([values["C"], values["D"]]).T
-                k = min(self.n_branches, along_outputs.shape[1])
-                directions[:, :k] = along_outputs[:, :k]
-            terms = _least_squares_terms(problem, theta, directions, trajectory)
-            V, W, c = terms
-            loss = (problem.fit_loss(model.pack(dict(values, V=V, W=W, coefficients=c)))
-                    if start else 0.0)
+            along_outputs = np.hstack([values["C"], values["D"]]).T
+            k = min(self.n_branches, along_outputs.shape[1])
+            directions[:, :k] = along_outputs[:, :k]
+            return directions, _least_squares_terms(problem, theta, directions, trajectory)
+        best, best_loss = None, np.inf
+        for _ in range(_SCREENED_DIRECTIONS):
+            directions = rng.standard_normal((n + n_u, self.n_branches))
+            V, W, c = terms = _least_squares_terms(problem, theta, directions, trajectory)
+            loss = problem.fit_loss(model.pack(dict(values, V=V, W=W, coefficients=c)))
             if best is None or loss < best_loss:
                 best, best_loss = (directions, terms), loss
         return best
