@@ -1,3 +1,4 @@
+import json
 import os
 from pathlib import Path
 
@@ -6,17 +7,28 @@ import pytest
 _SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
-def _load_or_skip(loader, title):
-    """Real benchmark records; skipped when absent unless CI requires them."""
-    data_home = os.environ.get("SKNLSS_DATA") or (
+def _data_home():
+    return os.environ.get("SKNLSS_DATA") or (
         str(_SHARED_DATA) if _SHARED_DATA.is_dir() else None
     )
+
+
+def _load_or_skip(loader, title):
+    """Shared data read by ``loader(data_home)``; skipped when absent unless CI
+    requires them."""
     try:
-        return loader(data_home=data_home, download_if_missing=False)
+        return loader(_data_home())
     except FileNotFoundError as exc:
         if os.environ.get("SKNLSS_REQUIRE_DATA") == "1":
             raise
         pytest.skip(f"{title} data not available: {exc}")
+
+
+def _read_reference_model(data_home):
+    path = Path(data_home or "") / "pnlss_tutorial" / "true_model.json"
+    if data_home is None or not path.is_file():
+        raise FileNotFoundError(path)
+    return json.loads(path.read_text())
 
 
 @pytest.fixture(scope="session")
@@ -24,7 +36,9 @@ def cascaded_tanks():
     """The real Cascaded Tanks records."""
     from sknlss.datasets import fetch_cascaded_tanks
 
-    return _load_or_skip(fetch_cascaded_tanks, "Cascaded Tanks")
+    return _load_or_skip(
+        lambda home: fetch_cascaded_tanks(data_home=home, download_if_missing=False),
+        "Cascaded Tanks")
 
 
 @pytest.fixture(scope="session")
@@ -32,4 +46,11 @@ def silverbox():
     """The real Silverbox records."""
     from sknlss.datasets import fetch_silverbox
 
-    return _load_or_skip(fetch_silverbox, "Silverbox")
+    return _load_or_skip(
+        lambda home: fetch_silverbox(data_home=home, download_if_missing=False), "Silverbox")
+
+
+@pytest.fixture(scope="session")
+def pnlss_tutorial_model():
+    """The reference PNLSS system as the shared data describe it."""
+    return _load_or_skip(_read_reference_model, "PNLSS tutorial")

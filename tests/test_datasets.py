@@ -442,6 +442,17 @@ def test_pnlss_reference_shapes_and_model():
     np.testing.assert_allclose(np.sqrt(np.mean(data.X**2)), 0.05, rtol=1e-12)
 
 
+def test_pnlss_reference_is_the_shared_true_model(pnlss_tutorial_model):
+    data = make_pnlss_reference(noise=False)
+    for name in "ABCDEF":
+        np.testing.assert_array_equal(getattr(data, name), pnlss_tutorial_model[name])
+    # The defaults are the tutorial's experiment.
+    experiment = pnlss_tutorial_model["experiment"]
+    assert data.period == experiment["samples_per_period"]
+    assert np.unique(data.sequence_id).size == experiment["realizations"]
+    assert data.X.shape[0] == data.period * experiment["periods"] * experiment["realizations"]
+
+
 def test_pnlss_reference_steady_state_and_reproducible():
     data = make_pnlss_reference(noise=False)
     periods = data.y.reshape(4, 3, 1024)
