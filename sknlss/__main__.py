@@ -6,6 +6,7 @@ the command does.
 
 import argparse
 import sys
+from pathlib import Path
 
 from .benchmarks import BENCHMARKS, reproduce
 
@@ -14,6 +15,21 @@ _DESCRIPTION = (
     "estimators' defaults and the model structure of the paper, at several random "
     "states, and print the median and the range of the test errors."
 )
+
+
+def _seed(text):
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a random state is a non-negative integer, got {value}")
+    return value
+
+
+def _n_jobs(text):
+    value = int(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError("0 fits at once: use a positive number, or -1 for "
+                                         "one per core")
+    return value
 
 
 def main(argv=None):
@@ -37,7 +53,7 @@ def main(argv=None):
         description=_DESCRIPTION)
     command.add_argument("--benchmark", choices=sorted(BENCHMARKS) + ["all"], default="all",
                          help="which benchmark to run (default: %(default)s)")
-    command.add_argument("--random-states", type=int, nargs="+", default=[0, 1, 2],
+    command.add_argument("--random-states", type=_seed, nargs="+", default=[0, 1, 2],
                          metavar="SEED", help="random states of the fits (default: 0 1 2)")
     command.add_argument("--data-home", default=None,
                          help="folder holding the benchmark data (default: $SKNLSS_DATA, "
@@ -45,12 +61,18 @@ def main(argv=None):
     command.add_argument("--output", default="sknlss_output",
                          help="folder for the tables (CSV) and figures (PNG) "
                               "(default: %(default)s)")
-    command.add_argument("--n-jobs", type=int, default=-1,
+    command.add_argument("--n-jobs", type=_n_jobs, default=-1,
                          help="fits run at once (default: one per core)")
     command.add_argument("--no-download", action="store_true",
                          help="never download the data; simulate them when absent")
     args = parser.parse_args(argv)
     benchmarks = sorted(BENCHMARKS) if args.benchmark == "all" else [args.benchmark]
+    try:
+        # Before the fits, which take minutes: a path that cannot be a folder
+        # fails now.
+        Path(args.output).mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        command.error(f"--output {args.output}: {error.strerror or error}")
     reproduce(benchmarks, data_home=args.data_home, output=args.output,
               download_if_missing=not args.no_download,
               random_states=tuple(args.random_states), n_jobs=args.n_jobs)

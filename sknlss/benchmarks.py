@@ -382,7 +382,9 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
         First folder searched for the data.
     output : str or path-like, default=None
         Folder where each benchmark's table (CSV) and figures (PNG, with
-        matplotlib) are written; nothing is written when None.
+        matplotlib) are written; nothing is written when None. It is created
+        before any fit, so that a path that cannot be a folder fails at once
+        (``OSError``).
     download_if_missing : bool, default=True
         Whether to download the data when they are absent.
     random_states : sequence of int, default=(0, 1, 2)
@@ -402,6 +404,8 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
     out = sys.stdout if out is None else out
     for name in benchmarks:
         _benchmark(name, "benchmarks")
+    if output is not None:
+        Path(output).mkdir(parents=True, exist_ok=True)
     tables = {}
     for name in benchmarks:
         benchmark = BENCHMARKS[name]

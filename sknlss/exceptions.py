@@ -5,7 +5,13 @@ The library also issues scikit-learn's
 its iteration limit while it is still improving.
 """
 
+import sys
+import warnings
+from pathlib import Path
+
 __all__ = ["LinearFallbackWarning", "SimulationDivergedWarning"]
+
+_PACKAGE = str(Path(__file__).resolve().parent)
 
 
 class SimulationDivergedWarning(RuntimeWarning):
@@ -27,3 +33,14 @@ class LinearFallbackWarning(UserWarning):
     returned either; that is recorded in ``fell_back_to_linear_`` without a
     warning, as a result of the selection.
     """
+
+
+def warn_at_caller(message, category):
+    """Issue a warning attributed to the first caller outside sknlss: the user's
+    line (or the scikit-learn tool that called the estimator), whatever the
+    depth of the library's own calls in between."""
+    frame, stacklevel = sys._getframe(1), 2
+    while frame is not None and Path(frame.f_code.co_filename).resolve().is_relative_to(
+            _PACKAGE):
+        frame, stacklevel = frame.f_back, stacklevel + 1
+    warnings.warn(message, category, stacklevel=stacklevel)

@@ -21,7 +21,7 @@ from ._core._multistart import run_starts
 from ._core._sequences import holdout_masks, sequence_bounds
 from ._estimators._base import _unfitted_on_error
 from ._validation import ANY_INTEGER, binary_magnitude, naming
-from .exceptions import SimulationDivergedWarning
+from .exceptions import SimulationDivergedWarning, warn_at_caller
 
 __all__ = ["HoldoutSearch"]
 
@@ -204,10 +204,10 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
             raise models[0]
         if len(fitted) < len(models):
             failed = next(model for model in models if isinstance(model, Exception))
-            warnings.warn(
+            warn_at_caller(
                 f"{len(models) - len(fitted)} of {len(models)} candidates failed to fit "
                 f"and are ranked last (see results_['error']); the first error: {failed}",
-                FitFailedWarning, stacklevel=3)
+                FitFailedWarning)
         # The candidates validated the data; the ranking only needs them as arrays.
         X_checked = np.asarray(X, dtype=np.float64)
         Y = np.asarray(y, dtype=np.float64).reshape(len(X_checked), -1)
@@ -227,10 +227,10 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         # all diverge).
         best = max(fitted, key=lambda i: scores[i])
         if scores[best] == -np.inf:
-            warnings.warn(
+            warn_at_caller(
                 "The simulation of every fitted candidate diverges on the held-out end: "
                 f"the first one ({candidates[best]}) is kept, but no candidate simulates "
-                "these data.", SimulationDivergedWarning, stacklevel=3)
+                "these data.", SimulationDivergedWarning)
         self.holdout_fraction_ = holdout_fraction
         self.results_ = {
             "params": candidates,

@@ -98,7 +98,18 @@ def test_measured_source_names_the_file_only(monkeypatch):
     assert benchmarks.load_benchmark("tiny")[1] == "measured (dataBenchmark.mat)"
 
 
-def test_command_line(monkeypatch):
+def test_reproduce_refuses_an_output_path_before_any_fit(monkeypatch, tmp_path):
+    monkeypatch.setitem(BENCHMARKS, "tiny", _tiny_benchmark())
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    out = io.StringIO()
+    with pytest.raises(OSError):
+        reproduce(["tiny"], output=a_file, random_states=(0,), out=out)
+    assert out.getvalue() == ""
+
+
+def test_command_line(monkeypatch, tmp_path, capsys):
+    monkeypatch.chdir(tmp_path)
     calls = []
     monkeypatch.setattr("sknlss.__main__.reproduce",
                         lambda names, **kwargs: calls.append((names, kwargs)))
@@ -111,6 +122,16 @@ def test_command_line(monkeypatch):
     assert calls[1][0] == sorted(BENCHMARKS)
     with pytest.raises(SystemExit):
         main(["reproduce", "--benchmark", "nowhere"])
+    # Usage errors, before any fit.
+    (tmp_path / "a_file").write_text("")
+    for arguments, message in [(["--output", "a_file"], "--output a_file"),
+                               (["--random-states", "-1"], "non-negative"),
+                               (["--n-jobs", "0"], "0 fits at once")]:
+        capsys.readouterr()
+        with pytest.raises(SystemExit):
+            main(["reproduce", *arguments])
+        assert message in capsys.readouterr().err
+    assert len(calls) == 2
 
 
 @pytest.mark.parametrize("name", sorted(BENCHMARKS))

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
+from sklearn.utils._param_validation import InvalidParameterError
 
 from sknlss import (
     BLAEstimator,
@@ -15,6 +16,7 @@ from sknlss import (
     NLLFRRegressor,
     NLSS2Regressor,
     PNLSSRegressor,
+    SimulationDivergedWarning,
 )
 from sknlss._core._model import StateSpaceModel
 from sknlss._core._problem import SimulationErrorProblem, fit_rows
@@ -324,3 +326,36 @@ def test_estimate_initial_state_bad_input(fitted_models, record):
         model.estimate_initial_state(u, y, x0=np.zeros(3))
     with pytest.raises(ValueError, match="x0 must be finite"):
         model.estimate_initial_state(u, y, x0=[np.nan, 0.0])
+
+
+def test_warnings_point_at_the_line_that_called_the_library(record):
+    u, y = record
+
+    def _located(call):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            call()
+        assert caught
+        return {(w.category, w.filename) for w in caught}
+
+    here = __file__
+    # Still improving at the iteration limit: from inside a start.
+    assert _located(lambda: PNLSSRegressor(2, max_iter=2, n_init=1).fit(u, y)) == {
+        (ConvergenceWarning, here)}
+    # Too short for the terms: the fallback, then the linear part's own search.
+    short = PNLSSRegressor(2, degree=(2, 3), max_iter=2, n_init=1)
+    assert {category for category, _ in _located(lambda: short.fit(u[:12], y[:12]))} >= {
+        LinearFallbackWarning}
+    assert {filename for _, filename in _located(lambda: short.fit(u[:12], y[:12]))} == {here}
+    # From predict, through simulate.
+    bla = BLAEstimator(n_states=2).fit(u, y)
+    assert _located(lambda: bla.predict(u * 1e300)) == {(SimulationDivergedWarning, here)}
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_period_has_the_bla_s_lower_bound(name, periodic):
+    X, y, sequence_id, _ = periodic
+    # The BLA's robust method needs three samples per period; the estimators
+    # that fit it refuse fewer as a parameter, before any fit.
+    with pytest.raises(InvalidParameterError, match="'period' parameter"):
+        FACTORIES[name](period=2).fit(X, y, sequence_id=sequence_id)

@@ -9,13 +9,14 @@ factorisation, and the smallest singular directions can be discarded (the
 output unchanged).
 """
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import LinAlgError, qr, svd
 from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
+
+from ..exceptions import warn_at_caller
 
 # Damping is raised by this factor after a rejected step and lowered by
 # _DAMPING_DOWN after an accepted one (the usual asymmetric schedule).
@@ -129,13 +130,11 @@ def warn_if_still_improving(label, max_iter, losses, validation):
     if not recent < (1.0 - _RECENT_GAIN) * before:
         return
     what = "cost" if validation is None else "held-out loss"
-    warnings.warn(
+    warn_at_caller(
         f"{label}: the iteration limit max_iter={max_iter} was reached while the "
         f"{what} was still improving ({before:.4g} to {recent:.4g} over the last "
         f"{window} iterations); increase max_iter to refine the fit.",
-        ConvergenceWarning,
-        stacklevel=4,
-    )
+        ConvergenceWarning)
 
 
 def _finite_residual(residual, theta):

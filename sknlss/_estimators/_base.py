@@ -13,7 +13,6 @@ vector the shared kernels simulate).
 """
 
 import functools
-import warnings
 from abc import ABCMeta, abstractmethod
 
 import numpy as np
@@ -32,7 +31,7 @@ from .._core._kernels import DIVERGENCE_BOUND
 from .._core._multistart import fit_initial_state
 from .._core._sequences import sequence_bounds, transient_mask
 from .._validation import Integers, binary_magnitude, naming
-from ..exceptions import SimulationDivergedWarning
+from ..exceptions import SimulationDivergedWarning, warn_at_caller
 
 #: The fitted attributes that describe the normalisation of the signals.
 _NORMALISATION = ("n_features_in_", "n_outputs_", "_y_was_1d", "u_offset_", "u_scale_",
@@ -270,14 +269,12 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         overflow = np.isinf(Y)
         Y[overflow] = np.nan
         if diverged or overflow.any():
-            warnings.warn(
+            warn_at_caller(
                 "The simulation left the bounded region (a state or output beyond "
                 f"{DIVERGENCE_BOUND:g} in normalised units, or an output beyond the "
                 "floating-point range): the model is unstable for this input; the "
                 "outputs from the divergence on are NaN.",
-                SimulationDivergedWarning,
-                stacklevel=2,
-            )
+                SimulationDivergedWarning)
         if self._y_was_1d:
             Y = Y[:, 0]
         return (Y, states) if return_states else Y

@@ -6,7 +6,6 @@ estimators call it for their initialisation and expose the result as a fitted
 :class:`BLAEstimator` in the user's units (:func:`fitted_bla`).
 """
 
-import warnings
 from dataclasses import dataclass
 from numbers import Real
 
@@ -28,6 +27,7 @@ from .._linear._realization import (
     ss_frf,
 )
 from .._validation import Integers
+from ..exceptions import warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
 
@@ -150,10 +150,10 @@ def _nonparametric(U, Y, starts, params):
         # An estimate whose variance is unknown cannot be weighted against the
         # others; unweighted, its few bins would decide the fit.
         rows = ", ".join(_span(starts, k) for k in without_variance)
-        warnings.warn(
+        warn_at_caller(
             f"{len(without_variance)} sequence(s) too short for a variance estimate of "
             f"the Local Polynomial Method (sequence_id; rows {rows}) are left out of the "
-            "nonparametric FRF.", UserWarning, stacklevel=2)
+            "nonparametric FRF.", UserWarning)
         records = [record for k, record in enumerate(records) if k not in without_variance]
     return [lpm_estimate(records, threshold)
             for threshold in (LPM_POWER_THRESHOLD, _STRICT_POWER_THRESHOLD)]
@@ -554,14 +554,14 @@ class BLAEstimator(_BaseStateSpace):
         remedy = "a max_frequency below the edge of the excited band"
         if _frf_method(params) == "lpm" and self.lpm_order > 0:
             remedy = f"a lower lpm_order (its narrower window), or {remedy}"
-        warnings.warn(
+        warn_at_caller(
             f"BLAEstimator(n_states={self.n_states}) simulates its estimation record "
             f"worse than the output's mean (normalised RMS error {error:.3g} from the "
             "least-squares initial state). Either the data hold little linear relation "
             "from X to y, or a few FRF lines far from the rest pull the fit, typically "
             "at the edge of the excited band (input leakage, closed-loop data): compare "
             f"frf_ with frf_model_ and try {remedy}.",
-            UserWarning, stacklevel=6)
+            UserWarning)
 
     def _fitted_model(self):
         model = StateSpaceModel(self.A_.shape[0], self.B_.shape[1], self.C_.shape[0])

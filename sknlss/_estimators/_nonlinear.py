@@ -41,7 +41,7 @@ from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import (holdout_masks, part_before_holdout, steady_state_rows,
                                 transient_mask)
 from .._validation import ANY_INTEGER, Integers
-from ..exceptions import LinearFallbackWarning
+from ..exceptions import LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
 from ._bla import _MEAN_LEVEL, BLAEstimator, fit_linear_model, fitted_bla
@@ -85,7 +85,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         **_BaseStateSpace._parameter_constraints,
         "n_states": [Integers(1, None, closed="left")],
         "estimate_x0": ["boolean"],
-        "period": [Integers(1, None, closed="left"), None],
+        "period": [Integers(3, None, closed="left"), None],
         "cost": [StrOptions({"time", "frequency"})],
         "stability_penalty": [Interval(Real, 0, None, closed="left")],
         "weight_decay": [Interval(Real, 0, None, closed="left")],
@@ -317,14 +317,14 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         n_values = n_cost_values(problem)
         if n_values >= model.n_params:
             return False
-        warnings.warn(
+        warn_at_caller(
             f"{type(self).__name__}({self._structure()}) has {model.n_params} parameters "
             f"but its cost holds only {n_values} values (n_transient={self.n_transient}, "
             f"validation_fraction={self.validation_fraction!r}): the nonlinear terms "
             "cannot be identified and the linear model is kept (its nonlinear terms "
             "are zero, its linear part refined on the simulation error). Use a longer "
             "record or a smaller model.",
-            LinearFallbackWarning, stacklevel=5)
+            LinearFallbackWarning)
         return True
 
     def _check_transient(self, starts, shares):
@@ -412,11 +412,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         remedy = ("center=True: with center=False the model has to produce the signals' "
                   "offsets through its dynamics" if not self._centred() else
                   "a look at bla_, the linear model it starts from")
-        warnings.warn(
+        warn_at_caller(
             f"{type(self).__name__}({self._structure()}) simulates its estimation record "
             f"worse than the output's mean (normalised RMS error {error:.3g}; "
             f"fell_back_to_linear_={self.fell_back_to_linear_}). Try {remedy}.",
-            UserWarning, stacklevel=5)
+            UserWarning)
 
     def _search(self, problem_sets, shares, theta, U, Y, starts):
         """The starts from the linear start ``theta``, each refined on the
@@ -488,9 +488,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                       "model is kept.")
             return contexts[0]["model"], linear_theta, result
         for message, category in start_warnings:
-            # Pointing at the caller of fit: _search, _fit_normalized, fit
-            # and its guard lie in between.
-            warnings.warn(message, category, stacklevel=5)
+            warn_at_caller(message, category)
         self._record_start(contexts[c_best], j_best, seed_best)
         if self._refits(shares):
             theta_best = self._refit(problem_sets[c_best][0.0], theta_best)
