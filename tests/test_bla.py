@@ -125,6 +125,44 @@ def test_cascaded_tanks_bla(cascaded_tanks):
     assert est_rms <= 0.75
 
 
+@pytest.mark.realdata
+def test_an_order_scan_past_what_the_frf_supports(cascaded_tanks, capfd):
+    # The LPM model of 25 states on the Cascaded Tanks is unstable and diverges
+    # on the estimation record; its state is not estimated from non-finite
+    # responses (nothing reaches LAPACK), and the model of the strongest
+    # windows, which simulates, is kept.
+    data = cascaded_tanks
+    bla = BLAEstimator(n_states=25).fit(data.X_est, data.y_est)
+    assert "illegal value" not in capfd.readouterr().err
+    assert np.all(np.abs(bla.poles_) < 1)
+    assert bla.score(data.X_est, data.y_est) > 0.8
+
+
+def test_a_linear_model_that_diverges_everywhere_is_refused(monkeypatch):
+    data = make_cascaded_tanks(n_samples=256, random_state=0)
+    parametric = _bla._parametric
+
+    def diverging(*args):
+        fit = parametric(*args)
+        fit.A = 1.5 * np.eye(len(fit.A))
+        fit.simulation_error = np.inf
+        return fit
+
+    monkeypatch.setattr(_bla, "_parametric", diverging)
+    with pytest.raises(ValueError, match=r"n_states=2: .* unstable \(a pole of magnitude 1.5\)"):
+        BLAEstimator(n_states=2).fit(data.X_est, data.y_est)
+
+
+def test_no_initial_state_for_a_model_that_diverges():
+    from sknlss._linear._realization import estimate_initial_state
+
+    A = np.array([[1e3]])
+    U = np.ones((400, 1))
+    x0, offset = estimate_initial_state(A, np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1)),
+                                        U, U.copy(), np.array([0, 400]), np.ones(400, bool))
+    assert x0.tolist() == [0.0] and offset.tolist() == [0.0]
+
+
 @pytest.mark.parametrize("lpm_order", [1, 2])
 def test_spare_state_stays_where_the_data_support_it(lpm_order):
     """Regression: a third state on the (second-order) simulated tanks.

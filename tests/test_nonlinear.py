@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
+from sklearn.metrics import r2_score
 from sklearn.utils._param_validation import InvalidParameterError
 
 from sknlss import (
@@ -359,3 +360,20 @@ def test_period_has_the_bla_s_lower_bound(name, periodic):
     # that fit it refuse fewer as a parameter, before any fit.
     with pytest.raises(InvalidParameterError, match="'period' parameter"):
         FACTORIES[name](period=2).fit(X, y, sequence_id=sequence_id)
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_whole_period_records_are_scored_on_every_sample(name, periodic):
+    X, y, sequence_id, period = periodic
+    # n_transient longer than a period: the samples prepended for the steady
+    # state, in fit and in predict; the score of one period keeps them all.
+    model = FACTORIES[name](n_states=2, period=period, n_transient=2 * period)
+    model.fit(X, y, sequence_id=sequence_id)
+    one = slice(0, period)
+    expected = r2_score(y[one], model.predict(X[one]))
+    assert model.score(X[one], y[one]) == pytest.approx(expected, rel=1e-9)
+    # A record that is not whole periods starts from x0: its transient is left out.
+    part = slice(0, period + 3 * period // 2)
+    rows = slice(2 * period, None)
+    expected = r2_score(y[part][rows], model.predict(X[part])[rows])
+    assert model.score(X[part], y[part]) == pytest.approx(expected, rel=1e-9)

@@ -191,6 +191,11 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """The fitted model: a :class:`~sknlss._core._model.StateSpaceModel`
         and its parameter vector."""
 
+    def _scored_rows(self, starts):
+        """The rows ``score`` compares: all but the first ``n_transient`` of
+        every sequence."""
+        return transient_mask(starts, self.n_transient)
+
     def _simulate_normalized(self, U, starts, x0, steady_state=False):
         """Simulate from initial states ``x0`` of shape (n_sequences, n_states).
 
@@ -388,7 +393,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             raise ValueError(
                 f"y has {y.shape[1]} output(s), the model was fitted on {y_pred.shape[1]}."
             )
-        keep = transient_mask(sequence_bounds(sequence_id, len(y_pred)), self.n_transient)
+        keep = self._scored_rows(sequence_bounds(sequence_id, len(y_pred)))
         if not keep.any():
             raise ValueError(
                 f"n_transient={self.n_transient} leaves no sample to score."

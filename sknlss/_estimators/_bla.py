@@ -205,7 +205,17 @@ def _fit_linear_model(U, Y, starts, params):
             fits.append(_parametric(estimate, U, Y, starts, mask, params))
         except (ValueError, np.linalg.LinAlgError):
             pass
-    return min(fits, key=lambda fit: fit.simulation_error)
+    best = min(fits, key=lambda fit: fit.simulation_error)
+    if best.simulation_error == np.inf:
+        radius = np.max(np.abs(np.linalg.eigvals(best.A)))
+        raise ValueError(
+            f"n_states={params['n_states']}: the linear model fitted to the FRF "
+            f"({best.frequencies.size} lines) is unstable (a pole of magnitude "
+            f"{radius:.4g}) and diverges when simulated on the estimation record. "
+            "Use fewer states, or check that the data hold a stable linear relation "
+            "from X to y."
+        )
+    return best
 
 
 def _parametric(estimate, U, Y, starts, mask, params):

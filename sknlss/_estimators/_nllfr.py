@@ -385,7 +385,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         Seeds the random branch directions.
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
-        ``period``, the number of samples prepended for the steady state.
+        ``period``, the number of samples prepended for the steady state
+        (every sample of a whole-period sequence then counts, in the cost
+        and in the score).
         Without ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence): a record rarely starts at rest.

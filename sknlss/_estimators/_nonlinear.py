@@ -529,6 +529,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values.update(self._terms_values())
         return self._model, self._model.pack(values)
 
+    def _scored_rows(self, starts):
+        if self.period is not None and not np.any(np.diff(starts) % self.period):
+            # Simulated in their periodic steady state, as in the cost: every
+            # sample counts.
+            return np.ones(starts[-1], dtype=bool)
+        return super()._scored_rows(starts)
+
     def _simulate_normalized(self, U, starts, x0, steady_state=False):
         lengths = np.diff(starts)
         if (not steady_state or self.period is None or self.n_transient == 0

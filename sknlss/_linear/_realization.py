@@ -390,7 +390,8 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     -------
     x0 : ndarray of shape (n,)
     offset : ndarray of shape (n_y,)
-        Output offset ``d``.
+        Output offset ``d``. Both are zero for a model whose simulation
+        diverges on the record.
     """
     n, n_y, n_seq = A.shape[0], C.shape[0], len(starts) - 1
     zeros = np.zeros((n_seq, n))
@@ -404,9 +405,13 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     n_rows = int(mask.sum())
     constant = np.tile(np.eye(n_y), (n_rows, 1))
     Phi = np.column_stack(columns + [constant])
+    target = (Y - forced)[mask].ravel()
+    if not (np.all(np.isfinite(Phi)) and np.all(np.isfinite(target))):
+        # The model diverges on the record: no initial state fits it.
+        return np.zeros(n), np.zeros(n_y)
     # A direction of the state whose free response on the cost rows is below
     # _STATE_RCOND of the largest (usually the offset's) is not determined by
     # them (fast modes after a long n_transient): the minimum-norm solution
     # leaves it out instead of fitting the noise with a huge state.
-    sol = np.linalg.lstsq(Phi, (Y - forced)[mask].ravel(), rcond=_STATE_RCOND)[0]
+    sol = np.linalg.lstsq(Phi, target, rcond=_STATE_RCOND)[0]
     return sol[:n], sol[n:]
