@@ -392,3 +392,14 @@ def test_the_lpm_keeps_the_model_that_simulates_better(monkeypatch):
     loose = BLAEstimator(n_states=3, estimate_x0=True).fit(X, y)
     error, loose_error = (nrmse(y, model.predict(X)) for model in (bla, loose))
     assert error < 0.3 and loose_error > 2 * error
+
+
+@pytest.mark.parametrize("period", [None, 128])
+def test_collinear_inputs_are_refused(period):
+    u, _ = multisine(128, n_periods=2, n_realizations=4, random_state=0)
+    x = u.reshape(-1)
+    y = np.column_stack([lfilter([0.0, 1.0], [1.0, -0.5], x), lfilter([0.0, 0.5], [1.0, -0.3], x)])
+    y += 1e-3 * np.random.default_rng(0).standard_normal(y.shape)
+    with pytest.raises(ValueError, match="inputs of X are collinear"):
+        BLAEstimator(n_states=2, period=period).fit(np.column_stack([x, 2.0 * x]), y,
+                                                    sequence_id=np.repeat(np.arange(4), 256))

@@ -35,6 +35,9 @@ LPM_POWER_THRESHOLD = 1e-3
 # discarded, so that a window without input power gives a finite, uninformative
 # estimate (with a large variance) rather than a division by zero.
 _LPM_RCOND = 1e-10
+# Condition number of an input block of the robust method above which its
+# inputs are taken as collinear (their FRFs cannot be told apart).
+_COLLINEAR_CONDITION = 1e12
 
 
 @dataclass
@@ -81,6 +84,13 @@ def _block_frf(Y, U):
     n_inputs), the columns being the experiments of one block.
     """
     # G U = Y  <=>  U^T G^T = Y^T
+    if U.shape[-1] > 1 and np.any(np.linalg.cond(U) > _COLLINEAR_CONDITION):
+        raise ValueError(
+            "The inputs of X are collinear over a group of realizations: the robust "
+            "method cannot separate them. Each input needs its own excitation, "
+            "different in every realization (e.g. random phases drawn per input and "
+            "per realization)."
+        )
     return np.swapaxes(np.linalg.solve(np.swapaxes(U, -1, -2), np.swapaxes(Y, -1, -2)),
                        -1, -2)
 
@@ -254,6 +264,16 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     G = coef[:, :n_u, :].transpose(0, 2, 1)  # (bin, n_y, n_u)
     var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
     window_power = np.sum(np.abs(Uw) ** 2, axis=(1, 2))
+    if n_u > 1:
+        # Where the inputs are collinear over a window, the FRFs of the
+        # inputs cannot be told apart: the bin counts as not excited.
+        window_power[rank < K.shape[2]] = 0.0
+        if not np.any(window_power):
+            raise ValueError(
+                "The inputs of X are collinear in every window of the Local "
+                "Polynomial Method: it cannot separate them. Each input needs its "
+                "own, independent excitation."
+            )
     bins = np.arange(1, n_bins + 1)
     keep = _band_mask(bins, n, max_frequency)
     return (bins[keep] / n, G[keep], None if var is None else var[keep],
