@@ -403,3 +403,18 @@ def test_collinear_inputs_are_refused(period):
     with pytest.raises(ValueError, match="inputs of X are collinear"):
         BLAEstimator(n_states=2, period=period).fit(np.column_stack([x, 2.0 * x]), y,
                                                     sequence_id=np.repeat(np.arange(4), 256))
+
+
+@pytest.mark.parametrize("n_periods", [1, 2, 3])
+def test_lpm_on_whole_periods_given_without_period(n_periods):
+    # Between the lines of a periodic input the record's DFT holds no input:
+    # the LPM leaves those bins out instead of extrapolating the FRF there.
+    u, _ = multisine(512, n_periods=n_periods, random_state=0)
+    u = u.reshape(-1, 1)
+    y_true = lfilter([0.0, 1.0], [1.0, -1.2, 0.5], u[:, 0])
+    y = y_true + 1e-3 * np.random.default_rng(1).standard_normal(y_true.shape)
+    bla = BLAEstimator(n_states=2).fit(u, y)
+    assert nrmse(y_true, bla.predict(u), n_transient=100) < 0.01
+    spectrum = np.abs(np.fft.rfft(u[:, 0]))
+    lines = np.flatnonzero(spectrum > 1e-6 * spectrum.max())
+    np.testing.assert_array_equal(np.round(bla.frequencies_ * len(u)), lines)

@@ -264,6 +264,12 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     G = coef[:, :n_u, :].transpose(0, 2, 1)  # (bin, n_y, n_u)
     var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
     window_power = np.sum(np.abs(Uw) ** 2, axis=(1, 2))
+    # A bin without input power of its own (an unexcited line of a periodic
+    # input, whose window still holds excited ones) has no FRF to estimate:
+    # its estimate would be extrapolated from the neighbours, with a variance
+    # that does not show it. It counts as not excited.
+    bin_power = np.sum(np.abs(Uf) ** 2, axis=1)
+    window_power[bin_power <= EXCITATION_THRESHOLD * bin_power.max(initial=0.0)] = 0.0
     if n_u > 1:
         # Where the inputs are collinear over a window, the FRFs of the
         # inputs cannot be told apart: the bin counts as not excited.
@@ -357,8 +363,11 @@ def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequen
     Returns
     -------
     estimate : FRFEstimate
-        On the bins below ``max_frequency`` whose window holds input power
-        (at least ``power_threshold`` times the largest window power).
+        On the bins below ``max_frequency`` that hold input power of their
+        own (more than ``EXCITATION_THRESHOLD`` times the strongest bin's: the
+        unexcited lines of a periodic input are left out) and whose window
+        holds input power (at least ``power_threshold`` times the largest
+        window power).
         The LPM cannot separate noise from nonlinear distortion on a
         non-periodic record: both variances are the same total variance.
         Records of different lengths contribute their own bins; estimates at
