@@ -272,8 +272,10 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     window_power[bin_power <= EXCITATION_THRESHOLD * bin_power.max(initial=0.0)] = 0.0
     if n_u > 1:
         # Where the inputs are collinear over a window, the FRFs of the
-        # inputs cannot be told apart: the bin counts as not excited.
-        window_power[rank < K.shape[2]] = 0.0
+        # inputs cannot be told apart: the bin counts as not excited. (A
+        # window narrower than its unknowns, on a very short record, is
+        # underdetermined whatever the inputs.)
+        window_power[rank < min(K.shape[1:])] = 0.0
         if not np.any(window_power):
             raise ValueError(
                 "The inputs of X are collinear in every window of the Local "
