@@ -355,10 +355,12 @@ class BLAEstimator(_BaseStateSpace):
     max_frequency : float, default=None
         Highest frequency used, in cycles per sample (0.5 is Nyquist). Within
         it, only the bins where the input has power are used: the excited lines
-        of a periodic excitation, or the LPM bins whose window holds input
-        power (at least 1e-3 of the largest window's, so that the leakage of a
-        band-limited input is left out; 1e-2 in the second attempt described
-        in the Notes). DC is never used (the offsets are removed separately).
+        of a periodic excitation, or the LPM bins that hold input power of
+        their own (more than 1e-8 of the strongest bin's: the lines between
+        those of a periodic input given without ``period`` are left out) and
+        whose window holds input power (at least 1e-3 of the largest window's,
+        so that the leakage of a band-limited input is left out; 1e-2 in the
+        second attempt described in the Notes). DC is never used (the offsets are removed separately).
     weighting : {"total", "noise"} or None, default="total"
         Variance weighting the parametric fit: ``"total"`` (noise plus
         nonlinear distortions) or ``"noise"``; each falls back on the other
