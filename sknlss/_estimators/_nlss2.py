@@ -306,6 +306,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         user's units.
     n_features_in_ : int
         Number of inputs.
+    u_offset_, u_scale_, y_offset_, y_scale_ : ndarray
+        Normalisation of the signals.
 
     See Also
     --------
