@@ -360,7 +360,8 @@ class BLAEstimator(_BaseStateSpace):
         those of a periodic input given without ``period`` are left out) and
         whose window holds input power (at least 1e-3 of the largest window's,
         so that the leakage of a band-limited input is left out; 1e-2 in the
-        second attempt described in the Notes). DC is never used (the offsets are removed separately).
+        second attempt described in the Notes). DC is never used (the offsets
+        are removed separately).
     weighting : {"total", "noise"} or None, default="total"
         Variance weighting the parametric fit: ``"total"`` (noise plus
         nonlinear distortions) or ``"noise"``; each falls back on the other
