@@ -76,8 +76,8 @@ def _write_figures(name, benchmark, data, fitted, output):
 
 def write_results(name, benchmark, data, rows, fitted, output, out):
     """Write the table (CSV) and, with matplotlib, the figures of one benchmark."""
+    # reproduce has created the folder before any fit.
     output = Path(output)
-    output.mkdir(parents=True, exist_ok=True)
     _write_table(rows, output / f"{name}.csv")
     print(f"Table written to {output / f'{name}.csv'}", file=out)
     try:

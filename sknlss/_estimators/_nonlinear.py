@@ -529,17 +529,21 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values.update(self._terms_values())
         return self._model, self._model.pack(values)
 
+    def _in_steady_state(self, starts):
+        """Whether the sequences are simulated in their periodic steady state,
+        as in the fit: whole periods of a model fitted with ``period`` and
+        ``n_transient``."""
+        return (self.period is not None and self.n_transient > 0
+                and not np.any(np.diff(starts) % self.period))
+
     def _scored_rows(self, starts):
-        if self.period is not None and not np.any(np.diff(starts) % self.period):
-            # Simulated in their periodic steady state, as in the cost: every
-            # sample counts.
+        if self._in_steady_state(starts):
+            # As in the cost, every sample counts.
             return np.ones(starts[-1], dtype=bool)
         return super()._scored_rows(starts)
 
     def _simulate_normalized(self, U, starts, x0, steady_state=False):
-        lengths = np.diff(starts)
-        if (not steady_state or self.period is None or self.n_transient == 0
-                or np.any(lengths % self.period)):
+        if not (steady_state and self._in_steady_state(starts)):
             return super()._simulate_normalized(U, starts, x0)
         # Periodic data: every sequence starts in steady state, as in the fit.
         index, sim_starts, original = steady_state_rows(starts, self.n_transient)

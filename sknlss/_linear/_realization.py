@@ -395,20 +395,22 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     """
     n, n_y, n_seq = A.shape[0], C.shape[0], len(starts) - 1
     zeros = np.zeros((n_seq, n))
-    forced = simulate_linear(A, B, C, D, U, starts, zeros)[0]
+    forced, _, diverged = simulate_linear(A, B, C, D, U, starts, zeros)
     no_input = np.zeros_like(U)
     columns = []
     for i in range(n):
         e = zeros.copy()
         e[:, i] = 1.0
-        columns.append(simulate_linear(A, B, C, D, no_input, starts, e)[0][mask].ravel())
+        free, _, free_diverged = simulate_linear(A, B, C, D, no_input, starts, e)
+        diverged |= free_diverged
+        columns.append(free[mask].ravel())
+    if diverged:
+        # No initial state fits a model that diverges on the record.
+        return np.zeros(n), np.zeros(n_y)
     n_rows = int(mask.sum())
     constant = np.tile(np.eye(n_y), (n_rows, 1))
     Phi = np.column_stack(columns + [constant])
     target = (Y - forced)[mask].ravel()
-    if not (np.all(np.isfinite(Phi)) and np.all(np.isfinite(target))):
-        # The model diverges on the record: no initial state fits it.
-        return np.zeros(n), np.zeros(n_y)
     # A direction of the state whose free response on the cost rows is below
     # _STATE_RCOND of the largest (usually the offset's) is not determined by
     # them (fast modes after a long n_transient): the minimum-norm solution
