@@ -36,7 +36,8 @@ print(f"Cascaded Tanks, data: {source}")
 # Fitting
 # -------
 # Third order, one sigmoid network of two neurons per state and per output,
-# initial state estimated: 71 parameters, as in the paper.
+# initial state estimated: the paper's 71 parameters, and the output offset
+# estimated with the initial state.
 model = NLSS2Regressor(n_states=3, n_neurons=2, estimate_x0=True, random_state=0)
 start = time.perf_counter()
 model.fit(data.X_est, data.y_est)

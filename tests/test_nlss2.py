@@ -71,8 +71,9 @@ def test_fitted_attributes_and_parameter_count():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         model.fit(u, y)
-    # The paper's count for the Cascaded Tanks model (n = 3, SISO, 2 neurons).
-    assert model.n_params_ == 71
+    # The paper's count for the Cascaded Tanks model (n = 3, SISO, 2 neurons),
+    # plus the output offset estimated with the initial state.
+    assert model.n_params_ == 71 + 1
     assert model.f_hidden_weights_.shape == (3, 2, 4)
     assert model.f_hidden_biases_.shape == (3, 2)
     assert model.f_output_weights_.shape == (3, 2)
@@ -81,9 +82,9 @@ def test_fitted_attributes_and_parameter_count():
     assert model.g_hidden_biases_.shape == (1, 2)
     assert model.g_output_weights_.shape == (1, 2)
     assert model.g_output_biases_.shape == (1,)
-    assert model.x0_.shape == (3,)
+    assert model.x0_.shape == (3,) and model.output_offset_.shape == (1,)
     n_free = sum(getattr(model, name).size for name in (
-        "A_", "B_", "C_", "D_", "x0_", "f_hidden_weights_", "f_hidden_biases_",
+        "A_", "B_", "C_", "D_", "x0_", "output_offset_", "f_hidden_weights_", "f_hidden_biases_",
         "f_output_weights_", "f_output_biases_", "g_hidden_weights_", "g_hidden_biases_",
         "g_output_weights_", "g_output_biases_"))
     assert n_free == model.n_params_

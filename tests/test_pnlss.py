@@ -118,8 +118,9 @@ def test_attributes_and_parameter_count():
     assert model.C_.shape == (2, 3) and model.D_.shape == (2, 2)
     assert model.E_.shape == (3, 6) and model.F_.shape == (2, 2)
     assert model.state_exponents_.shape == (6, 5)
-    assert model.x0_.shape == (3,)
-    assert model.n_params_ == 9 + 6 + 6 + 4 + 18 + 4 + 3
+    assert model.x0_.shape == (3,) and model.output_offset_.shape == (2,)
+    # A, B, C, D, E, F, then x0 and the output offset.
+    assert model.n_params_ == 9 + 6 + 6 + 4 + 18 + 4 + 3 + 2
     assert model.loss_history_.shape == (model.n_iter_ + 1,)
     assert model.validation_loss_history_.shape == model.loss_history_.shape
     assert isinstance(model.bla_, BLAEstimator)
@@ -309,3 +310,37 @@ def test_frequency_cost_needs_whole_periods():
     model = PNLSSRegressor(1, period=16, cost="frequency", validation_fraction=0.1)
     with pytest.raises(ValueError, match="whole number of periods"):
         model.fit(u, u[:, 0])
+
+
+def _quadratic_output_system(u, x0):
+    """A PNLSS system whose output has a square of a state: its mean is not zero,
+    and a record that starts away from rest has a transient besides."""
+    A = np.array([[0.7, 0.3], [-0.3, 0.6]])
+    B, C = np.array([1.0, 0.5]), np.array([1.0, 0.2])
+    x, y = np.array(x0, dtype=float), np.empty(len(u))
+    for t, u_t in enumerate(u):
+        y[t] = C @ x + 0.1 * u_t + 0.4 * x[0] ** 2
+        x = A @ x + B * u_t + np.array([0.1 * x[0] * x[1], 0.0])
+    return y
+
+
+def test_the_output_offset_estimated_with_x0_restores_the_centred_mean():
+    # The signals are centred on their means; the polynomial terms have no
+    # constant to restore the level the output varies about. The offset
+    # estimated with the initial state does: without it this noise-free
+    # system was fitted with a relative error of 0.129 at every random state,
+    # with it 0.0045 to 0.0049 (random states 0-2).
+    rng = np.random.default_rng(0)
+    u, u_test = 0.5 * rng.standard_normal(1500), 0.5 * rng.standard_normal(800)
+    y = _quadratic_output_system(u, [2.0, -1.0])
+    y_test = _quadratic_output_system(u_test, [0.0, 0.0])
+    errors = []
+    for seed in range(3):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            model = PNLSSRegressor(n_states=2, degree=2, estimate_x0=True,
+                                   random_state=seed).fit(u[:, None], y)
+        assert model.output_offset_.shape == (1,)
+        y_pred = model.predict(u_test[:, None], x0=np.zeros(2))
+        errors.append(rms_error(y_test[50:], y_pred[50:]) / np.std(y_test[50:]))
+    assert np.median(errors) < 0.02

@@ -17,7 +17,9 @@ The parameter vector of every model is
     theta = [vec(A), vec(B), vec(C), vec(D), theta_terms, x0]
 
 (row-major ``vec``; ``x0`` only when the initial state is estimated, shared
-by all sequences). The terms' parameters ``theta_terms`` are laid out by the
+by all sequences). Entries after ``x0`` (the output offset that
+:mod:`sknlss._core._model` adds) are not read, and their columns of the
+Jacobian are left at zero. The terms' parameters ``theta_terms`` are laid out by the
 terms object that owns them.
 
 **The terms contract.** With ``spec`` an integer array describing the terms'

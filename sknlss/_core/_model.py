@@ -5,7 +5,15 @@ A :class:`StateSpaceModel` joins the linear part shared by every model with a
 (see :mod:`sknlss._core._kernels` for the contract). The layout of the
 parameter vector is defined here once, for the kernels and for Python:
 
-    theta = [vec(A), vec(B), vec(C), vec(D), theta_terms, x0 (if estimated)]
+    theta = [vec(A), vec(B), vec(C), vec(D), theta_terms, x0, y0 (if estimated)]
+
+where ``y0`` is a constant added to the outputs. It is estimated with the
+initial state, as the BLA estimates it (see
+:func:`sknlss._linear._state_estimation.estimate_initial_state`): the
+normalised signals are centred on their means, which are not the levels that
+a record starting out of equilibrium settles about. The kernels never read
+it; this module adds it to their outputs and its identity sensitivity to
+their Jacobian.
 """
 
 import math
@@ -137,8 +145,8 @@ class StateSpaceModel:
     terms : Terms, default=None
         The nonlinear terms; ``None`` for a linear model.
     estimate_x0 : bool, default=False
-        Whether the initial state (shared by all sequences) ends the
-        parameter vector.
+        Whether the initial state (shared by all sequences) and the output
+        offset end the parameter vector.
     """
 
     def __init__(self, n_states, n_inputs, n_outputs, terms=None, *, estimate_x0=False):
@@ -149,7 +157,7 @@ class StateSpaceModel:
         self.blocks = [("A", (n, n)), ("B", (n, n_u)), ("C", (n_y, n)), ("D", (n_y, n_u))]
         self.blocks += list(self.terms.blocks)
         if self.estimate_x0:
-            self.blocks.append(("x0", (n,)))
+            self.blocks += [("x0", (n,)), ("y0", (n_y,))]
         sizes = [int(np.prod(shape, dtype=np.int64)) for _, shape in self.blocks]
         self.offsets = dict(zip((name for name, _ in self.blocks), np.cumsum([0] + sizes)))
         self.n_params = int(sum(sizes))
@@ -168,8 +176,8 @@ class StateSpaceModel:
 
     @property
     def linear_columns(self):
-        """Indices of A, B, C, D and x0."""
-        return self.columns("A", "B", "C", "D", "x0")
+        """Indices of A, B, C, D, x0 and y0."""
+        return self.columns("A", "B", "C", "D", "x0", "y0")
 
     @property
     def terms_columns(self):
@@ -196,7 +204,7 @@ class StateSpaceModel:
         one in theta, else zero."""
         if x0 is None:
             if self.estimate_x0:
-                x0 = theta[self.offsets["x0"] :]
+                x0 = theta[self.offsets["x0"] : self.offsets["y0"]]
             else:
                 x0 = np.zeros(self.n_states)
         x0 = np.asarray(x0, dtype=np.float64)
@@ -210,23 +218,35 @@ class StateSpaceModel:
         :meth:`initial_states`.
         """
         terms = self.terms
-        return _kernels.simulate(
+        Y, X, diverged = _kernels.simulate(
             _array(theta), self.n_outputs, self.n_terms,
             _array(terms.spec, np.int64), terms.work_init, *_contiguous(U, starts),
             self.initial_states(theta, len(starts) - 1, x0), _pointers(terms)[0],
         )
+        return self._with_output_offset(theta, Y), X, diverged
 
     def sensitivities(self, theta, U, starts, jacobian_rows, x0=None, *, with_local=False):
         """Outputs, states, the outputs' Jacobian on ``jacobian_rows``, the state
         map's local Jacobians there (with ``with_local``, else no rows) and the
         divergence flag (see :func:`sknlss._core._kernels.sensitivities`)."""
         terms = self.terms
-        return _kernels.sensitivities(
+        Y, X, J, local, diverged = _kernels.sensitivities(
             _array(theta), self.n_outputs, self.n_terms,
             terms.n_state_params, _array(terms.spec, np.int64), terms.work_init, *_contiguous(U, starts),
             self.initial_states(theta, len(starts) - 1, x0), self.estimate_x0,
             _array(jacobian_rows, np.int64), with_local, *_pointers(terms),
         )
+        if self.estimate_x0:
+            # The kernels leave the columns of y0 at zero.
+            outputs = np.arange(self.n_outputs)
+            J[:, outputs, self.offsets["y0"] + outputs] = 1.0
+        return self._with_output_offset(theta, Y), X, J, local, diverged
+
+    def _with_output_offset(self, theta, Y):
+        """The kernels' outputs ``Y`` plus the estimated output offset (in place)."""
+        if self.estimate_x0:
+            Y += theta[self.offsets["y0"] :]
+        return Y
 
     def local_jacobians(self, theta, S):
         """``[A; C] + dh/dx`` at the points ``S = [x; u]``, shape

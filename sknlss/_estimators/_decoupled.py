@@ -219,6 +219,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``extrapolation`` says.
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
+    output_offset_ : ndarray of shape (n_outputs,)
+        Constant output offset estimated with ``x0_`` (normalised units, zero
+        unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
+        ``y_offset_``.
     pnlss_ : PNLSSRegressor
         The fitted PNLSS model that was decoupled.
     bla_ : BLAEstimator
@@ -234,7 +238,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
         ``+ (n + n_u) r + (n + n_y) r`` (V, W) ``+ (d - 1) r`` (branches)
-        ``+ n`` (x0, when estimated).
+        ``+ n + n_y`` (x0 and the output offset, with ``estimate_x0``).
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
@@ -447,7 +451,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     def _linear_start(self, U, Y, starts, fit_mask):
         pnlss = self.pnlss_
         self.bla_ = pnlss.bla_
-        return pnlss.A_, pnlss.B_, pnlss.C_, pnlss.D_, pnlss.x0_
+        return {"A": pnlss.A_, "B": pnlss.B_, "C": pnlss.C_, "D": pnlss.D_, "x0": pnlss.x0_,
+                "y0": pnlss.output_offset_}
 
     def _linear_model(self, model, theta):
         # The starts begin at the PNLSS model's linear part, whose polynomials
@@ -455,7 +460,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         # even be stable. The model to beat is the BLA the PNLSS started from.
         bla = self.bla_
         return with_linear_part(model, {"A": bla.A_, "B": bla.B_, "C": bla.C_, "D": bla.D_,
-                                         "x0": bla.x0_})
+                                         "x0": bla.x0_, "y0": bla.output_offset_})
 
     def _prepare_starts(self, context):
         pnlss, starts, rows = self.pnlss_, context["starts"], context["rows"]

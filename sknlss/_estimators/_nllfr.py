@@ -420,12 +420,17 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         (``extrapolation``, with ``"auto"`` resolved for ``basis_``).
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
+    output_offset_ : ndarray of shape (n_outputs,)
+        Constant output offset estimated with ``x0_`` (normalised units, zero
+        unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
+        ``y_offset_``.
     bla_ : BLAEstimator
         The fitted linear model of the initialisation; it predicts and
         reports its FRF in the user's units.
     n_params_ : int
         Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
-        ``+ r (n + n_y) + r (n + n_u) + r n_basis`` (plus ``n`` for x0).
+        ``+ r (n + n_y) + r (n + n_u) + r n_basis`` (plus ``n + n_y``, x0 and
+        the output offset, with ``estimate_x0``).
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps of the kept start.
     loss_history_ : ndarray of shape (n_iter_ + 1,)

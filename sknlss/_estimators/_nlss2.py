@@ -106,7 +106,7 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
 
     The initial state (when estimated) is the mean of the estimated first
     states of the fitted sequences (the model has one initial state shared by
-    all sequences).
+    all sequences); the output offset starts at zero.
     """
     model, U_fit, Y_fit, starts_fit = (context[key] for key in
                                        ("model", "U_fit", "Y_fit", "starts_fit"))
@@ -118,6 +118,9 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
                                 activation, seed))
     if model.estimate_x0:
         values["x0"] = states[starts_fit[:-1]].mean(axis=0)
+        # The output networks, fitted to the whole output residual, hold its
+        # constant in their biases.
+        values["y0"] = np.zeros_like(values["y0"])
     return model.pack(values)
 
 
@@ -256,6 +259,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     g_output_biases_ : ndarray of shape (n_outputs,)
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
+    output_offset_ : ndarray of shape (n_outputs,)
+        Constant output offset estimated with ``x0_`` (normalised units, zero
+        unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
+        ``y_offset_``.
     alpha_ : float
         State-estimation weight used.
     alpha_losses_ : ndarray of shape (len(ALPHA_GRID),)
@@ -270,9 +277,11 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of free parameters: ``(n_states + n_outputs) * (n_states +
         n_inputs + 1 + n_neurons * (n_states + n_inputs + 2))``, plus
-        ``n_states`` with ``estimate_x0``. For ``n_states=3``, one input, one
-        output and ``n_neurons=2``: 68, or 71 with the initial state (the
-        paper's count).
+        ``n_states + n_outputs`` with ``estimate_x0``. For ``n_states=3``,
+        one input, one output and ``n_neurons=2``: 68, or 72 with the initial
+        state and the output offset (the paper counts 71: the offset
+        duplicates the output networks' biases, but the linear model that the
+        fit starts from and may keep needs it to be the BLA).
     n_iter_ : int
         Iterations of the kept start.
     loss_history_ : ndarray of shape (n_iter_ + 1,)

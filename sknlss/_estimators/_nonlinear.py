@@ -189,16 +189,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     )
 
     def _linear_start(self, U, Y, starts, fit_mask):
-        """The linear part and initial state the nonlinear model starts from:
-        the BLA on the rows before the held-out tails (also set as ``bla_``,
-        in the user's units)."""
+        """The linear part, initial state and output offset the nonlinear model
+        starts from, keyed by block name: the BLA on the rows before the
+        held-out tails (also set as ``bla_``, in the user's units)."""
         params = (self.bla if self.bla is not None else BLAEstimator()).get_params()
         params.update(n_states=self.n_states, estimate_x0=self.estimate_x0)
         if params["period"] is None:
             params["period"] = self.period
         linear = fit_linear_model(*part_before_holdout(U, Y, starts, fit_mask), params)
         self.bla_ = fitted_bla(params, linear, normalisation_of(self))
-        return linear.A, linear.B, linear.C, linear.D, linear.x0
+        return {"A": linear.A, "B": linear.B, "C": linear.C, "D": linear.D, "x0": linear.x0,
+                "y0": linear.output_offset}
 
     def _fit_linear_part(self, problem, theta):
         """``theta`` with its linear part (and x0) refined on the simulation
@@ -291,7 +292,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         n, n_u, n_y = self.n_states, U.shape[1], Y.shape[1]
         n_terms = self._n_terms_params(n_u, n_y)
         n_params = (n * n + n * n_u + n_y * n + n_y * n_u + n_terms
-                    + (n if self.estimate_x0 else 0))
+                    + (n + n_y if self.estimate_x0 else 0))
         # The largest Jacobian: the smallest hold-out and the shortest transient.
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
                                  validation_fraction=min(self._row_shares(shares)),
@@ -351,9 +352,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self._check_model_size(U, Y, starts, shares)
         bla_rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
                             validation_fraction=max(shares), steady_state_period=self.period)
-        A, B, C, D, x0 = self._linear_start(U, Y, starts,
-                                            bla_rows.fit_rows[bla_rows.original])
-        self.fit_transient_ = self._cost_transient(A, starts)
+        linear = self._linear_start(U, Y, starts, bla_rows.fit_rows[bla_rows.original])
+        self.fit_transient_ = self._cost_transient(linear["A"], starts)
         rows = {share: fit_rows(U, Y, starts, n_transient=self.fit_transient_,
                                 validation_fraction=share, steady_state_period=self.period)
                 for share in self._row_shares(shares)}
@@ -368,9 +368,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # starts: it sees only rows that none of the starts selects on.
         problem = problem_sets[0][max(shares)]
         model = problem.model
-        values = {name: np.zeros(shape) for name, shape in model.blocks}
-        values.update(A=A, B=B, C=C, D=D, x0=x0)
-        theta = model.pack(values)
+        theta = with_linear_part(model, linear)
         self.refit_n_iter_ = 0
         if self._underdetermined(problem):
             theta_best, result = self._fit_linear_part(problem, self._linear_model(model, theta))
@@ -388,13 +386,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values = model.unpack(theta_best)
         self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
         self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
+        self.output_offset_ = values["y0"] if self.estimate_x0 else np.zeros(Y.shape[1])
         # The structure the predictions simulate (the initial state is passed).
         self._model = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs,
                                       self._prediction_terms(model, theta_best, U, starts))
         self._set_terms(values)
         self.n_params_ = int(model.n_params)
         self._set_search_result(result)
-        self._warn_if_worse_than_the_mean(U, Y, starts)
+        # The predictions simulate without the output offset: as the BLA
+        # does, it moves into the offset of the output's normalisation.
+        self.y_offset_ = self.y_offset_ + self.y_scale_ * self.output_offset_
+        self._warn_if_worse_than_the_mean(U, Y - self.output_offset_, starts)
 
     def _warn_if_worse_than_the_mean(self, U, Y, starts):
         """Warn when the fitted model simulates its estimation record worse than
@@ -567,10 +569,10 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
 
 
 def with_linear_part(model, linear):
-    """The parameters of ``model`` with the linear part (and x0) of the unpacked
-    ``linear`` and its terms switched off."""
+    """The parameters of ``model`` with the linear part (and x0 and y0) of the
+    unpacked ``linear`` and its terms switched off."""
     values = {name: np.zeros(shape) for name, shape in model.blocks}
-    values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0")
+    values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0", "y0")
                   if name in values)
     return model.pack(values)
 

@@ -178,10 +178,14 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         says.
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
+    output_offset_ : ndarray of shape (n_outputs,)
+        Constant output offset estimated with ``x0_`` (normalised units, zero
+        unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
+        ``y_offset_``.
     n_params_ : int
         Number of free parameters, as counted in the paper:
-        ``n^2 + n n_u + n_y n + n_y n_u + n n_zeta + n_y n_eta`` (plus ``n``
-        when x0 is estimated).
+        ``n^2 + n n_u + n_y n + n_y n_u + n n_zeta + n_y n_eta`` (plus
+        ``n + n_y``, x0 and the output offset, with ``estimate_x0``).
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
