@@ -212,7 +212,10 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         X_checked = np.asarray(X, dtype=np.float64)
         Y = np.asarray(y, dtype=np.float64).reshape(len(X_checked), -1)
         starts = sequence_bounds(sequence_id, len(X_checked))
-        n_transient = self.estimator.get_params().get("n_transient", 0)
+        params = self.estimator.get_params()
+        # With a period, the transient is simulated before each sequence, not
+        # taken from it.
+        n_transient = 0 if params.get("period") is not None else params.get("n_transient", 0)
         rows = holdout_masks(starts, n_transient, holdout_fraction)[1]
         if not rows.any():
             raise ValueError(

@@ -70,7 +70,7 @@ def test_single_record_with_initial_state_lpm():
     bla = BLAEstimator(n_states=3, estimate_x0=True).fit(X, y)
     assert np.abs(np.sort_complex(bla.poles_) - np.sort_complex(poles)).max() < 5e-3
     assert bla.noise_variance_ is bla.total_variance_
-    assert bla.n_params_ == 16 + 3
+    assert bla.n_params_ == 16 + 3 + 1  # and the initial state and output offset
     # with the estimated initial state, the simulation error is at the noise level
     assert rms_error(y_true, bla.predict(X)) < sigma
     assert rms_error(y, bla.predict(X)) < 1.3 * sigma

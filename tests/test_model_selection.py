@@ -136,3 +136,15 @@ def test_predict_before_fit_raises():
 
     with pytest.raises(NotFittedError):
         HoldoutSearch(PNLSSRegressor()).predict(np.zeros((5, 1)))
+
+
+def test_a_periodic_model_prepends_its_transient_to_the_ranked_end():
+    # With a period, n_transient samples are simulated before each sequence,
+    # none is left out of it: half of each two-period sequence holds out one
+    # whole period to rank on, even with a transient of one period.
+    u, y, sequence_id = _quadratic_system(n_samples=100, n_sequences=2)
+    model = PNLSSRegressor(n_states=1, degree=2, period=50, n_transient=50, max_iter=3,
+                           n_init=1, random_state=0)
+    search = HoldoutSearch(model, validation_fractions=(0.5,)).fit(
+        u, y, sequence_id=sequence_id)
+    assert search.holdout_fraction_ == 0.5 and np.isfinite(search.best_score_)

@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.metrics import r2_score
@@ -84,7 +85,8 @@ def test_estimate_x0(name, record):
 
 def _terms_count(model):
     """Parameters beyond those of the (x0-estimating) linear model."""
-    linear = sum(getattr(model, name).size for name in ("A_", "B_", "C_", "D_", "x0_"))
+    linear = sum(getattr(model, name).size
+                 for name in ("A_", "B_", "C_", "D_", "x0_", "output_offset_"))
     return model.n_params_ - linear
 
 
@@ -99,6 +101,14 @@ def test_steady_state_and_frequency_cost(name, periodic):
     one = model.predict(X[:period])
     two = model.predict(np.vstack([X[:period], X[:period]]))
     np.testing.assert_allclose(one, two[period:], atol=1e-8)
+    # Each sequence by itself: a record that is not whole periods beside it
+    # starts from the initial state, and leaves the whole period as it is.
+    mixed = np.repeat([0, 1], [period, period + 5])
+    both = model.predict(np.vstack([X[:period], X[:period + 5]]), sequence_id=mixed)
+    np.testing.assert_array_equal(both[:period], one)
+    np.testing.assert_array_equal(both[period:], model.predict(X[:period + 5]))
+    rows = model._scored_rows(np.array([0, period, 2 * period + 5]))
+    assert rows[:period].all() and not rows[period:2 * period].any() and rows[2 * period:].all()
 
 
 @pytest.mark.parametrize("name", FACTORIES)
@@ -377,3 +387,20 @@ def test_whole_period_records_are_scored_on_every_sample(name, periodic):
     rows = slice(2 * period, None)
     expected = r2_score(y[part][rows], model.predict(X[part])[rows])
     assert model.score(X[part], y[part]) == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_linear_model_kept_on_a_short_record_stays_stable():
+    # 200 samples are too few for a four-state PNLSS model: the linear model
+    # is kept, its linear part refined on the simulation error. That
+    # refinement reached a pole at 1.0018 from a BLA with poles at 0.98 and
+    # 0.78, and predicted a hundred times the output on a longer input.
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal((200, 1))
+    linear = lfilter([0.0, 0.5, 0.2], [1.0, -1.2, 0.5], u[:, 0])
+    y = linear + 0.3 * linear**3 + 0.05 * rng.standard_normal(200)
+    with pytest.warns(LinearFallbackWarning):
+        model = PNLSSRegressor(n_states=4, n_init=1, max_iter=50, random_state=0).fit(u, y)
+    assert model.fell_back_to_linear_
+    assert np.max(np.abs(np.linalg.eigvals(model.A_))) < 1.0
+    u_long = np.random.default_rng(9).standard_normal((5000, 1))
+    np.testing.assert_allclose(model.predict(u_long), model.bla_.predict(u_long), atol=1e-9)

@@ -53,10 +53,12 @@ def sequence_bounds(sequence_id, n_samples):
 
 
 def transient_mask(starts, n_transient):
-    """Boolean mask of the rows kept once ``n_transient`` samples per sequence are dropped."""
+    """Boolean mask of the rows kept once ``n_transient`` samples per sequence
+    are dropped (an int, or one per sequence)."""
     mask = np.ones(starts[-1], dtype=bool)
-    for begin, end in zip(starts[:-1], starts[1:]):
-        mask[begin : min(begin + n_transient, end)] = False
+    n_drop = np.broadcast_to(n_transient, (len(starts) - 1,))
+    for begin, end, n in zip(starts[:-1], starts[1:], n_drop):
+        mask[begin : min(begin + n, end)] = False
     return mask
 
 
@@ -114,7 +116,8 @@ def part_before_holdout(U, Y, starts, fit_mask):
 
 
 def steady_state_rows(starts, n_prepend):
-    """Row indices of the sequences, each preceded by its last ``n_prepend`` samples.
+    """Row indices of the sequences, each preceded by its last ``n_prepend``
+    samples (an int, or one per sequence).
 
     Simulating a periodic signal from this extension starts every sequence in
     (approximately) steady state. Returns the row index into the original
@@ -122,7 +125,8 @@ def steady_state_rows(starts, n_prepend):
     rows that are original samples.
     """
     index, original, new_starts = [], [], [0]
-    for begin, end in zip(starts[:-1], starts[1:]):
+    n_heads = np.broadcast_to(n_prepend, (len(starts) - 1,))
+    for begin, end, n_prepend in zip(starts[:-1], starts[1:], n_heads):
         length = end - begin
         head = begin + (np.arange(length - n_prepend, length) % length)
         index.append(head)

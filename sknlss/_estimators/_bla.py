@@ -24,6 +24,7 @@ from .._linear._realization import (
     n_block_rows,
     refine_frf,
     simulate_linear,
+    spectral_radius,
     ss_frf,
 )
 from .._validation import Integers
@@ -207,7 +208,7 @@ def _fit_linear_model(U, Y, starts, params):
             pass
     best = min(fits, key=lambda fit: fit.simulation_error)
     if best.simulation_error == np.inf:
-        radius = np.max(np.abs(np.linalg.eigvals(best.A)))
+        radius = spectral_radius(best.A)
         raise ValueError(
             f"n_states={params['n_states']}: the linear model fitted to the FRF "
             f"({best.frequencies.size} lines) is unstable (a pole of magnitude "
@@ -290,7 +291,7 @@ def _set_fitted(bla, fit, normalisation):
     bla.n_iter_, bla.loss_history_ = fit.n_iter, fit.loss_history
     bla.n_params_ = n * n + n * (fit.B.shape[1] + n_y) + n_y * fit.B.shape[1]
     if bla.estimate_x0:
-        bla.n_params_ += n
+        bla.n_params_ += n + n_y
 
 
 def fitted_bla(params, fit, normalisation):
@@ -422,8 +423,9 @@ class BLAEstimator(_BaseStateSpace):
     frf_model_ : ndarray of shape (n_freq, n_outputs, n_inputs), complex
         FRF of the parametric model at ``frequencies_``, in the user's units.
     n_params_ : int
-        Number of parameters as counted in the paper,
-        ``n^2 + n n_u + n_y n + n_y n_u`` (plus ``n`` with ``estimate_x0``).
+        Number of parameters, ``n^2 + n n_u + n_y n + n_y n_u`` (plus
+        ``n + n_y``, the initial state and the output offset, with
+        ``estimate_x0``).
     n_iter_ : int
         Levenberg-Marquardt iterations performed.
     loss_history_ : ndarray of shape (n_iter_ + 1,)

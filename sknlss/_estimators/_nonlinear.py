@@ -44,6 +44,7 @@ from .._validation import ANY_INTEGER, Integers
 from ..exceptions import LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
+from .._linear._realization import spectral_radius
 from ._bla import _MEAN_LEVEL, BLAEstimator, fit_linear_model, fitted_bla
 
 
@@ -203,17 +204,28 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 
     def _fit_linear_part(self, problem, theta):
         """``theta`` with its linear part (and x0) refined on the simulation
-        error, the terms left as they are, and the search's result."""
+        error, the terms left as they are, and the search's result.
+
+        A refinement that takes a stable linear part out of the unit circle is
+        not taken (``theta`` is returned as it is, with the result of a search
+        without iterations): a short record is fitted as well by a mode that
+        grows over its length, and such a model runs away beyond it.
+        """
         model = problem.model
         free = model.linear_columns
         options = dict(self._lm_options(model), n_drop=model.n_states**2)
-        theta = theta.copy()
+        restricted = problem.restricted(theta, free)
+        label = f"{self._label} (linear part)"
+        refined = theta.copy()
         try:
-            theta[free], result = fit_from(problem.restricted(theta, free), [theta[free]],
-                                           label=f"{self._label} (linear part)", **options)
+            refined[free], result = fit_from(restricted, [theta[free]], label=label, **options)
+            if (spectral_radius(model.unpack(refined)["A"]) >= 1.0
+                    > spectral_radius(model.unpack(theta)["A"])):
+                return theta, fit_from(restricted, [theta[free]], label=label,
+                                       **dict(options, max_iter=0))[1]
         except START_ERRORS as failure:
             raise self._unfittable(failure) from failure
-        return theta, result
+        return refined, result
 
     def _refined_linear_start(self, problem, theta):
         """The starting parameters with the linear part (and x0) refined on the
@@ -259,7 +271,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         model's slowest pole (a record rarely starts at rest)."""
         if self.estimate_x0 or self.period is not None:
             return self.n_transient
-        radius = np.max(np.abs(np.linalg.eigvals(A)), initial=0.0)
+        radius = spectral_radius(A)
         limit = int(_MAX_TRANSIENT_SHARE * np.min(np.diff(starts)))
         if radius >= 1.0:
             # A mode that does not decay never settles (the decoupled model
@@ -323,7 +335,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             f"but its cost holds only {n_values} values (n_transient={self.n_transient}, "
             f"validation_fraction={self.validation_fraction!r}): the nonlinear terms "
             "cannot be identified and the linear model is kept (its nonlinear terms "
-            "are zero, its linear part refined on the simulation error). Use a longer "
+            "are zero, its linear part refined on the simulation error where that keeps "
+            "it stable). Use a longer "
             "record or a smaller model.",
             LinearFallbackWarning)
         return True
@@ -531,24 +544,28 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values.update(self._terms_values())
         return self._model, self._model.pack(values)
 
-    def _in_steady_state(self, starts):
-        """Whether the sequences are simulated in their periodic steady state,
-        as in the fit: whole periods of a model fitted with ``period`` and
+    def _steady_sequences(self, starts):
+        """Which sequences are simulated in their periodic steady state, as in
+        the fit: the whole-period ones, for a model fitted with ``period`` and
         ``n_transient``."""
-        return (self.period is not None and self.n_transient > 0
-                and not np.any(np.diff(starts) % self.period))
+        lengths = np.diff(starts)
+        if self.period is None or self.n_transient == 0:
+            return np.zeros(lengths.size, dtype=bool)
+        return lengths % self.period == 0
 
     def _scored_rows(self, starts):
-        if self._in_steady_state(starts):
-            # As in the cost, every sample counts.
-            return np.ones(starts[-1], dtype=bool)
-        return super()._scored_rows(starts)
+        # As in the cost, every sample of a steady-state sequence counts.
+        return transient_mask(starts, np.where(self._steady_sequences(starts), 0,
+                                               self.n_transient))
 
     def _simulate_normalized(self, U, starts, x0, steady_state=False):
-        if not (steady_state and self._in_steady_state(starts)):
+        steady = self._steady_sequences(starts) & steady_state
+        if not steady.any():
             return super()._simulate_normalized(U, starts, x0)
-        # Periodic data: every sequence starts in steady state, as in the fit.
-        index, sim_starts, original = steady_state_rows(starts, self.n_transient)
+        # Periodic data: every whole-period sequence starts in steady state, as
+        # in the fit; the others from their initial state.
+        index, sim_starts, original = steady_state_rows(
+            starts, np.where(steady, self.n_transient, 0))
         Y, X, diverged = super()._simulate_normalized(np.ascontiguousarray(U[index]),
                                                       sim_starts, x0)
         return Y[original], X[original], diverged

@@ -41,6 +41,11 @@ _ROUND_ITER = 20
 _STATE_RCOND = 1e-8
 
 
+def spectral_radius(A):
+    """Largest pole magnitude of the state matrix ``A`` (0 without states)."""
+    return float(np.max(np.abs(np.linalg.eigvals(A)), initial=0.0))
+
+
 def ss_frf(A, B, C, D, frequencies):
     """FRF ``C (zI - A)^-1 B + D`` of a discrete-time model.
 
@@ -321,7 +326,7 @@ def balanced_realization(A, B, C, D):
     A, B, C, D : ndarray
     hankel_singular_values : ndarray of shape (n,) or None
     """
-    if np.max(np.abs(np.linalg.eigvals(A)), initial=0.0) >= 1.0:
+    if spectral_radius(A) >= 1.0:
         return A, B, C, D, None
     Lc = _psd_sqrt(solve_discrete_lyapunov(A, B @ B.T))
     Lo = _psd_sqrt(solve_discrete_lyapunov(A.T, C.T @ C))
