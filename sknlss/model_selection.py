@@ -100,6 +100,8 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         Share of the end of every sequence on which the candidates are ranked.
     n_features_in_ : int
         Number of inputs.
+    feature_names_in_ : ndarray of shape (n_features_in_,)
+        Names of the inputs, when ``X`` has column names of strings.
 
     See Also
     --------
@@ -222,8 +224,10 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
                 f"validation_fractions: the smallest share, {holdout_fraction}, holds out "
                 "no sample of these records (it is rounded to whole samples per "
                 "sequence); use a larger share.")
+        # The candidates predict the input as given (a DataFrame keeps its
+        # column names).
         errors = [(-np.inf, np.inf) if isinstance(model, Exception)
-                  else _holdout_errors(model, X_checked, Y, sequence_id, rows)
+                  else _holdout_errors(model, X, Y, sequence_id, rows)
                   for model in models]
         scores = [score for score, _ in errors]
         # The first of the best fitted candidates (the first fitted one when
@@ -247,6 +251,8 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         self.best_params_ = candidates[best]
         self.best_score_ = scores[best]
         self.n_features_in_ = self.best_estimator_.n_features_in_
+        if hasattr(self.best_estimator_, "feature_names_in_"):
+            self.feature_names_in_ = self.best_estimator_.feature_names_in_
         return self
 
     def predict(self, X, *, sequence_id=None, x0=None):

@@ -23,8 +23,8 @@ def test_sequence_bounds():
         ([0, 0, 1], "one label per sample"),
         (np.zeros((4, 1)), "one label per sample"),
         ([0, 0, 1, 0], "contiguous"),
-        ([0.0, 0.5, 1.0, 1.0], "integer labels"),
-        (["a", "a", "b", "b"], "integer labels"),
+        ([0.0, 0.5, 1.0, 1.0], "integer labels.*not whole numbers"),
+        (["a", "a", "b", "b"], "integer labels.*<U1 with labels that are not numbers"),
         ([0.0, np.nan, 1.0, 1.0], "integer labels"),
     ],
 )
@@ -35,6 +35,9 @@ def test_sequence_bounds_errors(sequence_id, match):
 
 def test_transient_mask():
     starts = np.array([0, 3, 5, 10])
+    np.testing.assert_array_equal(
+        transient_mask(starts, [0, 1, 2]),
+        [True, True, True, False, True, False, False, True, True, True])
     np.testing.assert_array_equal(
         transient_mask(starts, 2),
         [False, False, True, False, False, False, False, True, True, True],

@@ -8,7 +8,8 @@ from scipy.signal import lfilter
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
-from sknlss import BLAEstimator, DecoupledPNLSS, PNLSSRegressor, PolynomialBasis
+from sknlss import (BLAEstimator, DecoupledPNLSS, LinearFallbackWarning, PNLSSRegressor,
+                    PolynomialBasis)
 from sknlss._core._model import StateSpaceModel
 from sknlss._estimators._decoupled import _stack_polynomials
 from sknlss._terms._branches import BranchTerms
@@ -229,3 +230,18 @@ def test_only_the_final_optimisation_warns(wiener_data):
     from_pnlss = [w for w in caught if issubclass(w.category, ConvergenceWarning)
                   and str(w.message).startswith("PNLSS")]
     assert not from_pnlss
+
+
+def test_the_pnlss_fit_warns_in_the_decoupled_models_name(wiener_data):
+    # 40 samples are too few for the PNLSS model's terms: it warns that it
+    # keeps its linear model, and the user who fitted a DecoupledPNLSS reads
+    # it in that name.
+    u, y = wiener_data
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        DecoupledPNLSS(n_states=2, rank=1, n_init=1, random_state=0).fit(u[:40], y[:40])
+    messages = [str(w.message) for w in caught if w.category is LinearFallbackWarning]
+    assert any(m.startswith("DecoupledPNLSS: the PNLSS model it starts from: PNLSSRegressor(")
+               for m in messages)
+    assert not any(m.startswith("PNLSSRegressor(") for m in messages)
+    assert all(w.filename == __file__ for w in caught)

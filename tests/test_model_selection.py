@@ -1,8 +1,11 @@
 """HoldoutSearch: fits with different held-out ends, ranked on their common end."""
 
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.base import clone
+from sklearn.exceptions import ConvergenceWarning
 
 from sknlss import BLAEstimator, PNLSSRegressor
 from sknlss.metrics import rms_error
@@ -148,3 +151,16 @@ def test_a_periodic_model_prepends_its_transient_to_the_ranked_end():
     search = HoldoutSearch(model, validation_fractions=(0.5,)).fit(
         u, y, sequence_id=sequence_id)
     assert search.holdout_fraction_ == 0.5 and np.isfinite(search.best_score_)
+
+
+def test_a_dataframe_keeps_its_column_names():
+    pd = pytest.importorskip("pandas")
+    u, y, _ = _quadratic_system()
+    X = pd.DataFrame(u, columns=["voltage"])
+    with warnings.catch_warnings():
+        # Predicting an array with a model fitted on named columns would warn.
+        warnings.simplefilter("error", UserWarning)
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        search = HoldoutSearch(PNLSSRegressor(n_states=1, degree=2, max_iter=3, n_init=1),
+                               validation_fractions=(0.2, 0.3)).fit(X, y)
+    np.testing.assert_array_equal(search.feature_names_in_, ["voltage"])

@@ -326,6 +326,8 @@ def test_estimate_initial_state_recovers_the_state(name, fitted_models, record):
 def test_estimate_initial_state_bad_input(fitted_models, record):
     model = fitted_models["PNLSS"]
     u, y = record[0][:20], record[1][:20]
+    with pytest.warns(UserWarning, match="1 output value.* cannot determine the 2 states"):
+        model.estimate_initial_state(u[:1], y[:1])
     with pytest.raises(ValueError, match="y must have 20 rows"):
         model.estimate_initial_state(u, y[:10])
     with pytest.raises(ValueError, match="NaN"):

@@ -36,9 +36,11 @@ def sequence_bounds(sequence_id, n_samples):
         if ids.dtype.kind == "f" and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)):
             ids = ids.astype(np.int64)
         else:
+            found = ("values that are not whole numbers" if ids.dtype.kind == "f"
+                     else "labels that are not numbers")
             raise ValueError(
                 "sequence_id must hold integer labels (whole numbers, also as floats); "
-                f"got dtype {ids.dtype} with values that are not whole numbers."
+                f"got dtype {ids.dtype} with {found}."
             )
     change = np.flatnonzero(ids[1:] != ids[:-1]) + 1
     starts = np.concatenate(([0], change, [n_samples])).astype(np.int64)

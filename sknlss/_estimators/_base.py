@@ -355,6 +355,11 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
                 f"got shape {y.shape}."
             )
         start = self._initial_states(x0, 1)[0]
+        if Y.size < start.size:
+            warn_at_caller(
+                f"estimate_initial_state: {Y.size} output value(s) cannot determine the "
+                f"{start.size} states; the state returned is one of many that fit them. "
+                "Pass more samples.", UserWarning)
         model, theta = self._fitted_model()
         return fit_initial_state(model, theta, _normalised(X, self.u_offset_, self.u_scale_),
                                  _normalised(Y, self.y_offset_, self.y_scale_), start,

@@ -19,6 +19,7 @@ from .._terms._bases import PolynomialBasis
 from .._terms._branches import BranchTerms
 from .._terms._cpd import decouple_polynomial
 from .._validation import Integers
+from ..exceptions import warn_at_caller
 from ._base import _unfitted_on_error
 from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms, with_linear_part
 from ._pnlss import PNLSSRegressor
@@ -406,12 +407,17 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self._check_transient(starts, self._validation_shares(starts))
         pnlss = clone(self._template())
         pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
+        for warning in caught:
             # The PNLSS model is the starting point of the decoupling, which is
             # optimised again: whether its own iterations had settled is not
-            # the result (the final optimisation warns for itself).
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
+            # the result (the final optimisation warns for itself). What else
+            # it says concerns this estimator's user, in its name.
+            if not issubclass(warning.category, ConvergenceWarning):
+                warn_at_caller(f"{type(self).__name__}: the PNLSS model it starts from: "
+                               f"{warning.message}", warning.category)
         return self._fit(X, y, sequence_id)
 
     def _template(self):
