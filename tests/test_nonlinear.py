@@ -406,3 +406,14 @@ def test_the_linear_model_kept_on_a_short_record_stays_stable():
     assert np.max(np.abs(np.linalg.eigvals(model.A_))) < 1.0
     u_long = np.random.default_rng(9).standard_normal((5000, 1))
     np.testing.assert_allclose(model.predict(u_long), model.bla_.predict(u_long), atol=1e-9)
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_an_input_of_one_line_is_refused(name):
+    # Thirty whole periods of a sine: one line, as the BLA of the whole record
+    # sees it. The BLA of the rows before the held-out end, which hold no
+    # whole number of periods, saw the sine's leakage at every bin instead,
+    # and the fits went on to models with an R² of -258 to -1500.
+    u = np.sin(2 * np.pi * 30 * np.arange(600) / 600)[:, None]
+    with pytest.raises(ValueError, match=r"the 1 frequency line\(s\) that the input excites"):
+        FACTORIES[name](n_states=2).fit(u, u[:, 0] + 0.3 * u[:, 0] ** 3)

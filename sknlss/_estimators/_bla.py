@@ -16,7 +16,13 @@ from threadpoolctl import threadpool_limits
 
 from .._core._model import StateSpaceModel
 from .._core._sequences import transient_mask
-from .._linear._frf import LPM_POWER_THRESHOLD, lpm_estimate, lpm_records, robust_frf
+from .._linear._frf import (
+    EXCITATION_THRESHOLD,
+    LPM_POWER_THRESHOLD,
+    lpm_estimate,
+    lpm_records,
+    robust_frf,
+)
 from .._linear._realization import (
     balanced_realization,
     estimate_initial_state,
@@ -219,18 +225,43 @@ def _fit_linear_model(U, Y, starts, params):
     return best
 
 
+def _check_lines(n_lines, which, n, n_u, n_y):
+    """Refuse a linear model of ``n`` states that ``n_lines`` frequency lines
+    (``which``, for the message) cannot determine."""
+    n_free = n * (n_u + n_y) + n_y * n_u
+    if 2 * n_lines * n_y * n_u < n_free:
+        raise ValueError(
+            f"n_states={n} is too large for the {n_lines} frequency line(s) {which}: "
+            f"{2 * n_lines * n_y * n_u} real FRF values cannot determine "
+            f"{n_free} identifiable parameters. Use a longer record, an input that "
+            "excites more frequencies, or fewer states."
+        )
+
+
+def check_excitation(U, starts, n_states, n_outputs):
+    """Refuse normalised inputs ``U`` whose records excite too few frequency
+    lines for a linear model of ``n_states`` states.
+
+    The lines are the DFT bins (DC aside) of every sequence where the inputs
+    hold more than ``EXCITATION_THRESHOLD`` of that sequence's strongest
+    bin's power. A nonlinear estimator fits its BLA on part of the record,
+    where the leakage of a periodic input that does not fill that part whole
+    spreads over every bin; counted on the whole record, a sine of whole
+    periods is one line.
+    """
+    n_lines = 0
+    for begin, end in zip(starts[:-1], starts[1:]):
+        power = np.sum(np.abs(np.fft.rfft(U[begin:end], axis=0)[1:]) ** 2, axis=1)
+        n_lines += int(np.sum(power > EXCITATION_THRESHOLD * power.max(initial=0.0)))
+    _check_lines(n_lines, "that the input excites", n_states, U.shape[1], n_outputs)
+
+
 def _parametric(estimate, U, Y, starts, mask, params):
     """Balanced state-space model fitted to the nonparametric ``estimate``,
     checked on the estimation rows ``mask``."""
     n, n_u, n_y = params["n_states"], U.shape[1], Y.shape[1]
     n_freq = estimate.frequencies.size
-    n_free = n * (n_u + n_y) + n_y * n_u
-    if 2 * n_freq * n_y * n_u < n_free:
-        raise ValueError(
-            f"n_states={n} is too large for the {n_freq} frequency line(s) of the "
-            f"FRF: {2 * n_freq * n_y * n_u} real FRF values cannot determine "
-            f"{n_free} identifiable parameters. Use a longer record or fewer states."
-        )
+    _check_lines(n_freq, "of the FRF", n, n_u, n_y)
     n_block_rows(n, n_freq, n_u)
     weight = _weights(estimate, params["weighting"])
     G, freqs = estimate.frf, estimate.frequencies

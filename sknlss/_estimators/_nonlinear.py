@@ -45,7 +45,7 @@ from ..exceptions import LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
 from .._linear._realization import spectral_radius
-from ._bla import _MEAN_LEVEL, BLAEstimator, fit_linear_model, fitted_bla
+from ._bla import _MEAN_LEVEL, BLAEstimator, check_excitation, fit_linear_model, fitted_bla
 
 
 #: Held-out shares of the end of every sequence given to the starts in turn
@@ -360,6 +360,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 
     def _fit_normalized(self, U, Y, starts):
         self._check_periodic(starts)
+        check_excitation(U, starts, self.n_states, Y.shape[1])
         shares = self._validation_shares(starts)
         self._check_transient(starts, shares)
         self._check_model_size(U, Y, starts, shares)
