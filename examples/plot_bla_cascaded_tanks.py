@@ -40,7 +40,7 @@ fit_time = time.perf_counter() - start
 
 y_est = bla.predict(data.X_est)
 y_test = bla.predict(data.X_test)
-print(f"BLA: {bla.n_params_} parameters (initial state included), "
+print(f"BLA: {bla.n_params_} parameters (initial state and output offset included), "
       f"fitted in {fit_time:.2f} s")
 print(f"RMS error on the estimation record: {rms_error(data.y_est, y_est):.4f} V")
 print(f"RMS error on the test record:       {rms_error(data.y_test, y_test):.4f} V")

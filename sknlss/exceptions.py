@@ -27,7 +27,8 @@ class LinearFallbackWarning(UserWarning):
 
     The cost of the fit holds fewer values than the model has parameters: the
     estimator keeps its linear model (the nonlinear terms are zero, the linear
-    part is refined on the simulation error) and sets
+    part is refined on the simulation error unless that would make a stable
+    linear part unstable) and sets
     ``fell_back_to_linear_``. A nonlinear model that the record can identify
     but that does not beat its linear start on the held-out data is not
     returned either; that is recorded in ``fell_back_to_linear_`` without a

@@ -366,7 +366,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
                                  max_iter=max_iter)
 
     def score(self, X, y, sample_weight=None, *, sequence_id=None):
-        """R² of the simulated output, skipping ``n_transient`` samples per sequence.
+        """R² of the simulated output, skipping ``n_transient`` samples per
+        sequence (none of a sequence simulated in periodic steady state).
 
         Parameters
         ----------

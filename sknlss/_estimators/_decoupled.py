@@ -121,7 +121,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         way; only predictions beyond that range differ.
     estimate_x0 : bool, default=False
         Estimate the initial state (shared by all sequences, forwarded to the
-        PNLSS model); ``predict`` then starts from ``x0_``.
+        PNLSS model) and a constant output offset with it
+        (``output_offset_``); ``predict`` then starts from ``x0_``.
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
         ``n_states``, ``estimate_x0``, ``period``, ``cost``,
@@ -286,9 +287,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     branch has ``d - 1`` coefficients (powers 2 to ``d``: no linear term), so
     ``n_params_`` has ``(2 n + n_u + n_y + d - 1) r`` of them. For the
     Cascaded Tanks model of the paper (``n = 3``, ``n_u = n_y = 1``,
-    ``r = 5``, x0 estimated), cubic branches give 16 + 3 + 50 = 69 parameters;
-    the paper's 84 is its formula with ``d = 5`` (here reached with
-    ``branch_degree=6``). Scaling a branch's input or output direction (with
+    ``r = 5``, x0 estimated), cubic branches give 16 + 3 + 1 + 50 = 70
+    parameters (the linear part, x0, the output offset estimated with it and
+    the branches); the paper's 84 is its formula with ``d = 5`` (its 65
+    nonlinear parameters are reached with ``branch_degree=6``, 85 in all). Scaling a branch's input or output direction (with
     the inverse scaling of its coefficients) and similarity transforms of
     the states leave the model unchanged; the re-optimisation discards these
     ``n^2 + 2 r`` directions.

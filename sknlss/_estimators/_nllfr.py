@@ -317,8 +317,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         as those of a bounded basis standing in for a polynomial (see the
         user guide).
     estimate_x0 : bool, default=False
-        Estimate the initial state, shared by all sequences; ``predict`` then
-        starts from the fitted ``x0_``.
+        Estimate the initial state, shared by all sequences, and a constant
+        output offset with it (``output_offset_``); ``predict`` then starts
+        from the fitted ``x0_``.
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -344,8 +345,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         with the record: it restrains the terms on a short record and fades on
         a long one.
     refine_linear : bool, default=False
-        Refine A, B, C, D (and x0) on the simulation error before the
-        branches are initialised.
+        Refine A, B, C, D (and x0 and the output offset) on the simulation
+        error before the branches are initialised, unless that would make a
+        stable linear part unstable.
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
         this model's ``n_states``, ``estimate_x0`` and (if its own is None)

@@ -161,7 +161,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     activation : {"sigmoid", "tanh"}, default="sigmoid"
         Activation of the hidden units.
     estimate_x0 : bool, default=False
-        Estimate the initial state shared by all sequences (as in PNLSS-I).
+        Estimate the initial state shared by all sequences (as in PNLSS-I),
+        and a constant output offset with it (``output_offset_``).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -188,8 +189,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         a long one.
     refine_linear : bool, default=True
         Before estimating the states, refine the linear model by minimising
-        its simulation error (with its own initial state when
-        ``estimate_x0``), keeping the iterate best on the validation rows.
+        its simulation error (with its own initial state and output offset
+        when ``estimate_x0``), keeping the iterate best on the validation
+        rows, unless that would make a stable linear part unstable.
         This makes the initialisation less dependent on the details of the
         frequency-domain BLA.
     bla : BLAEstimator, default=None
@@ -326,8 +328,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     Notes
     -----
     One network per component (rather than one network per function with
-    shared hidden units) reproduces the paper's count of 71 parameters for the
-    Cascaded Tanks model: 16 linear, 4 networks of 13 and the initial state.
+    shared hidden units) gives the paper's count of 71 parameters for the
+    Cascaded Tanks model (16 linear, 4 networks of 13 and the initial state),
+    72 with the output offset estimated with the initial state.
 
     Fitting: the linear estimator is fitted on the rows that are not held
     out (and, with ``refine_linear``, refined in the time domain). Then, for
@@ -336,7 +339,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     every network is fitted to its linear-model residual by
     :class:`~sklearn.neural_network.MLPRegressor` (L-BFGS, a different random
     initialisation per start); the initial state starts at the estimated
-    first state. Levenberg-Marquardt then minimises the simulation error on
+    first state, the output offset at zero. Levenberg-Marquardt then minimises the simulation error on
     the fitted rows with the analytic Jacobian; with ``validation_fraction``,
     the iterate and the start with the lowest validation error are kept;
     with ``refit``, that iterate is then refined on all the rows.

@@ -65,8 +65,9 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         The fit is the same whichever is chosen; only predictions beyond the
         box differ.
     estimate_x0 : bool, default=False
-        Estimate the initial state, shared by all sequences (PNLSS-I);
-        ``predict`` then starts from the fitted ``x0_``.
+        Estimate the initial state, shared by all sequences (PNLSS-I), and
+        a constant output offset with it (``output_offset_``); ``predict``
+        then starts from the fitted ``x0_``.
     center : bool, default=True
         Expand the polynomials around the mean of the signals (zero mean, unit
         standard deviation) instead of around the signals' own zero (only
@@ -77,10 +78,11 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         records that do not start at rest; without it, a polynomial system
         whose zero is a rest state is exactly representable.
     refine_linear : bool, default=False
-        Before the nonlinear terms are freed, refine A, B, C, D (and x0) on
-        the same cost with E = F = 0. This recovers from a poor nonparametric
-        BLA (short or noisy records); ``False`` starts the nonlinear
-        optimisation from the BLA itself, as in the paper.
+        Before the nonlinear terms are freed, refine A, B, C, D (and x0 and
+        the output offset) on the same cost with E = F = 0, unless that
+        would make a stable linear part unstable. This recovers from a poor
+        nonparametric BLA (short or noisy records); ``False`` starts the
+        nonlinear optimisation from the BLA itself, as in the paper.
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -183,9 +185,11 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
         ``y_offset_``.
     n_params_ : int
-        Number of free parameters, as counted in the paper:
-        ``n^2 + n n_u + n_y n + n_y n_u + n n_zeta + n_y n_eta`` (plus
-        ``n + n_y``, x0 and the output offset, with ``estimate_x0``).
+        Number of free parameters:
+        ``n^2 + n n_u + n_y n + n_y n_u + n n_zeta + n_y n_eta``, plus ``n``
+        for x0 with ``estimate_x0`` (as the paper counts PNLSS-I) and ``n_y``
+        for the output offset estimated with it (which the paper does not
+        count).
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
