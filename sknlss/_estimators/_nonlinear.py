@@ -360,10 +360,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 
     def _fit_normalized(self, U, Y, starts):
         self._check_periodic(starts)
-        check_excitation(U, starts, self.n_states, Y.shape[1])
         shares = self._validation_shares(starts)
         self._check_transient(starts, shares)
         self._check_model_size(U, Y, starts, shares)
+        check_excitation(U, starts, self.n_states, Y.shape[1])
         bla_rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
                             validation_fraction=max(shares), steady_state_period=self.period)
         linear = self._linear_start(U, Y, starts, bla_rows.fit_rows[bla_rows.original])
