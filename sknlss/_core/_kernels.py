@@ -19,8 +19,8 @@ The parameter vector of every model is
 (row-major ``vec``; ``x0`` only when the initial state is estimated, shared
 by all sequences). Entries after ``x0`` (the output offset that
 :mod:`sknlss._core._model` adds) are not read, and their columns of the
-Jacobian are left at zero. The terms' parameters ``theta_terms`` are laid out by the
-terms object that owns them.
+Jacobian are left at zero. The terms' parameters ``theta_terms`` are laid
+out by the terms object that owns them.
 
 **The terms contract.** With ``spec`` an integer array describing the terms'
 structure and ``work`` a work array that every kernel call starts as a copy

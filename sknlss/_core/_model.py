@@ -9,7 +9,7 @@ parameter vector is defined here once, for the kernels and for Python:
 
 where ``y0`` is a constant added to the outputs. It is estimated with the
 initial state, as the BLA estimates it (see
-:func:`sknlss._linear._state_estimation.estimate_initial_state`): the
+:func:`sknlss._linear._realization.estimate_initial_state`): the
 normalised signals are centred on their means, which are not the levels that
 a record starting out of equilibrium settles about. The kernels never read
 it; this module adds it to their outputs and its identity sensitivity to

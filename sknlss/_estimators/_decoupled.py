@@ -290,8 +290,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     ``r = 5``, x0 estimated), cubic branches give 16 + 3 + 1 + 50 = 70
     parameters (the linear part, x0, the output offset estimated with it and
     the branches); the paper's 84 is its formula with ``d = 5`` (its 65
-    nonlinear parameters are reached with ``branch_degree=6``, 85 in all). Scaling a branch's input or output direction (with
-    the inverse scaling of its coefficients) and similarity transforms of
+    nonlinear parameters are reached with ``branch_degree=6``, 85 in all).
+    Scaling a branch's input or output direction (with the inverse scaling
+    of its coefficients) and similarity transforms of
     the states leave the model unchanged; the re-optimisation discards these
     ``n^2 + 2 r`` directions.
 

@@ -8,8 +8,8 @@ Every nonlinear estimator identifies ``x(t+1) = A x + B u + h_x(x, u)``,
    periodic data);
 2. the Best Linear Approximation on the rows before the held-out tails,
    exposed as ``bla_`` in the user's units;
-3. optionally, the linear part (and x0 and y0) refined on the simulation error with
-   the terms switched off;
+3. optionally, the linear part (and x0 and y0) refined on the simulation
+   error with the terms switched off;
 4. one or more starting points of the terms (the estimator's own
    initialisation), each refined by Levenberg-Marquardt on the shared
    :class:`~sknlss._core._problem.SimulationErrorProblem`; the start with the
@@ -40,11 +40,11 @@ from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import (holdout_masks, part_before_holdout, steady_state_rows,
                                 transient_mask)
+from .._linear._realization import spectral_radius
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
-from .._linear._realization import spectral_radius
 from ._bla import _MEAN_LEVEL, BLAEstimator, check_excitation, fit_linear_model, fitted_bla
 
 
@@ -203,8 +203,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                 "y0": linear.output_offset}
 
     def _fit_linear_part(self, problem, theta):
-        """``theta`` with its linear part (and x0 and y0) refined on the simulation
-        error, the terms left as they are, and the search's result.
+        """``theta`` with its linear part (and x0 and y0) refined on the
+        simulation error, the terms left as they are, and the search's result.
 
         A refinement that takes a stable linear part out of the unit circle is
         not taken (``theta`` is returned as it is, with the result of a search
@@ -228,8 +228,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return refined, result
 
     def _refined_linear_start(self, problem, theta):
-        """The starting parameters with the linear part (and x0 and y0) refined on the
-        simulation error, the terms switched off (with ``refine_linear``)."""
+        """The starting parameters with the linear part (and x0 and y0) refined
+        on the simulation error, the terms switched off (with
+        ``refine_linear``)."""
         if not self.refine_linear or self.max_iter == 0:
             return theta
         # A poor nonparametric BLA (short or noisy records) would otherwise
@@ -336,8 +337,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             f"validation_fraction={self.validation_fraction!r}): the nonlinear terms "
             "cannot be identified and the linear model is kept (its nonlinear terms "
             "are zero, its linear part refined on the simulation error where that keeps "
-            "it stable). Use a longer "
-            "record or a smaller model.",
+            "it stable). Use a longer record or a smaller model.",
             LinearFallbackWarning)
         return True
 
