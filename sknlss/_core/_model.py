@@ -153,16 +153,25 @@ class StateSpaceModel:
         self.n_states, self.n_inputs, self.n_outputs = n_states, n_inputs, n_outputs
         self.terms = Terms() if terms is None else terms
         self.estimate_x0 = bool(estimate_x0)
-        n, n_u, n_y = n_states, n_inputs, n_outputs
-        self.blocks = [("A", (n, n)), ("B", (n, n_u)), ("C", (n_y, n)), ("D", (n_y, n_u))]
-        self.blocks += list(self.terms.blocks)
-        if self.estimate_x0:
-            self.blocks += [("x0", (n,)), ("y0", (n_y,))]
+        self.blocks = self.layout(n_states, n_inputs, n_outputs, self.terms.blocks,
+                                  estimate_x0=self.estimate_x0)
         sizes = [int(np.prod(shape, dtype=np.int64)) for _, shape in self.blocks]
         self.offsets = dict(zip((name for name, _ in self.blocks), np.cumsum([0] + sizes)))
         self.n_params = int(sum(sizes))
-        self.n_linear = n * n + n * n_u + n_y * n + n_y * n_u
+        self.n_linear = parameter_count(self.blocks[:4])
         self.n_terms = self.terms.n_params
+
+    @staticmethod
+    def layout(n_states, n_inputs, n_outputs, terms_blocks=(), *, estimate_x0=False):
+        """The parameter blocks ``(name, shape)`` of the model, known before
+        its terms are built: the linear part, the terms' blocks, then x0 and
+        y0 with ``estimate_x0``."""
+        n, n_u, n_y = n_states, n_inputs, n_outputs
+        blocks = [("A", (n, n)), ("B", (n, n_u)), ("C", (n_y, n)), ("D", (n_y, n_u))]
+        blocks += list(terms_blocks)
+        if estimate_x0:
+            blocks += [("x0", (n,)), ("y0", (n_y,))]
+        return blocks
 
     # ---------------------------------------------------------------- layout
     def columns(self, *names):

@@ -14,7 +14,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
-from .._core._model import StateSpaceModel
+from .._core._model import StateSpaceModel, parameter_count
 from .._core._sequences import transient_mask
 from .._linear._frf import (
     EXCITATION_THRESHOLD,
@@ -320,9 +320,8 @@ def _set_fitted(bla, fit, normalisation):
         else:
             bla.total_variance_ = bla.noise_variance_ if total is noise else total * scale**2
     bla.n_iter_, bla.loss_history_ = fit.n_iter, fit.loss_history
-    bla.n_params_ = n * n + n * (fit.B.shape[1] + n_y) + n_y * fit.B.shape[1]
-    if bla.estimate_x0:
-        bla.n_params_ += n + n_y
+    bla.n_params_ = parameter_count(StateSpaceModel.layout(
+        n, fit.B.shape[1], n_y, estimate_x0=bla.estimate_x0))
 
 
 def fitted_bla(params, fit, normalisation):

@@ -35,7 +35,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from .._core._memory import check_memory
-from .._core._model import StateSpaceModel
+from .._core._model import StateSpaceModel, parameter_count
 from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import (holdout_masks, part_before_holdout, steady_state_rows,
@@ -302,10 +302,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         counted from the structure, since listing the terms of a huge model
         alone can exhaust the memory.
         """
-        n, n_u, n_y = self.n_states, U.shape[1], Y.shape[1]
+        n_u, n_y = U.shape[1], Y.shape[1]
         n_terms = self._n_terms_params(n_u, n_y)
-        n_params = (n * n + n * n_u + n_y * n + n_y * n_u + n_terms
-                    + (n + n_y if self.estimate_x0 else 0))
+        n_params = n_terms + parameter_count(StateSpaceModel.layout(
+            self.n_states, n_u, n_y, estimate_x0=self.estimate_x0))
         # The largest Jacobian: the smallest hold-out and the shortest transient.
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
                                  validation_fraction=min(self._row_shares(shares)),
