@@ -210,10 +210,11 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
                 f"{len(models) - len(fitted)} of {len(models)} candidates failed to fit "
                 f"and are ranked last (see results_['error']); the first error: {failed}",
                 FitFailedWarning)
-        # The candidates validated the data; the ranking only needs them as arrays.
-        X_checked = np.asarray(X, dtype=np.float64)
-        Y = np.asarray(y, dtype=np.float64).reshape(len(X_checked), -1)
-        starts = sequence_bounds(sequence_id, len(X_checked))
+        # The candidates validated the data; the ranking only needs the
+        # output as an array (they predict the input as given).
+        Y = np.asarray(y, dtype=np.float64)
+        Y = Y.reshape(len(Y), -1)
+        starts = sequence_bounds(sequence_id, len(Y))
         params = self.estimator.get_params()
         # With a period, the transient is simulated before each sequence, not
         # taken from it.
@@ -224,8 +225,6 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
                 f"validation_fractions: the smallest share, {holdout_fraction}, holds out "
                 "no sample of these records (it is rounded to whole samples per "
                 "sequence); use a larger share.")
-        # The candidates predict the input as given (a DataFrame keeps its
-        # column names).
         errors = [(-np.inf, np.inf) if isinstance(model, Exception)
                   else _holdout_errors(model, X, Y, sequence_id, rows)
                   for model in models]
