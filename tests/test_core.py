@@ -431,10 +431,14 @@ def test_linear_part_refined_alone_recovers_a_perturbed_model():
     refined[free] = fit_from(problem.restricted(theta, free), [theta[free]], label="linear",
                              max_iter=100, tol=1e-14, n_drop=4)[0]
     fitted = model.unpack(refined)
-    # The same input-output behaviour (equal Markov parameters); the terms stay 0.
+    # The same input-output behaviour (equal Markov parameters); the terms stay 0
+    # but for the output networks' biases, which hold the output offset (0 here).
     markov = [C @ np.linalg.matrix_power(A, k) @ B for k in range(5)]
     refined_markov = [fitted["C"] @ np.linalg.matrix_power(fitted["A"], k) @ fitted["B"]
                       for k in range(5)]
     np.testing.assert_allclose(refined_markov, markov, atol=1e-6)
     np.testing.assert_allclose(fitted["D"], D, atol=1e-6)
-    np.testing.assert_array_equal(refined[model.terms_columns], 0.0)
+    assert model.offset_block == "g_c"
+    offset = model.columns("g_c")
+    np.testing.assert_array_equal(refined[np.setdiff1d(model.terms_columns, offset)], 0.0)
+    np.testing.assert_allclose(refined[offset], 0.0, atol=1e-6)

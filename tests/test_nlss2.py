@@ -2,6 +2,7 @@ import warnings
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
@@ -71,9 +72,9 @@ def test_fitted_attributes_and_parameter_count():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         model.fit(u, y)
-    # The paper's count for the Cascaded Tanks model (n = 3, SISO, 2 neurons),
-    # plus the output offset estimated with the initial state.
-    assert model.n_params_ == 71 + 1
+    # The paper's count for the Cascaded Tanks model (n = 3, SISO, 2 neurons):
+    # the output networks' biases hold the output offset.
+    assert model.n_params_ == 71
     assert model.f_hidden_weights_.shape == (3, 2, 4)
     assert model.f_hidden_biases_.shape == (3, 2)
     assert model.f_output_weights_.shape == (3, 2)
@@ -82,12 +83,31 @@ def test_fitted_attributes_and_parameter_count():
     assert model.g_hidden_biases_.shape == (1, 2)
     assert model.g_output_weights_.shape == (1, 2)
     assert model.g_output_biases_.shape == (1,)
-    assert model.x0_.shape == (3,) and model.output_offset_.shape == (1,)
+    assert model.x0_.shape == (3,)
+    np.testing.assert_array_equal(model.output_offset_, [0.0])
     n_free = sum(getattr(model, name).size for name in (
-        "A_", "B_", "C_", "D_", "x0_", "output_offset_", "f_hidden_weights_", "f_hidden_biases_",
+        "A_", "B_", "C_", "D_", "x0_", "f_hidden_weights_", "f_hidden_biases_",
         "f_output_weights_", "f_output_biases_", "g_hidden_weights_", "g_hidden_biases_",
         "g_output_weights_", "g_output_biases_"))
     assert n_free == model.n_params_
+
+
+def test_the_linear_model_to_fall_back_on_is_the_bla_with_its_offset():
+    # Noisy data of a linear system that starts away from rest and varies about
+    # a level of its own: without re-optimisation (max_iter=0) the network
+    # starts do worse than the BLA on the held-out end (at random states 0-3).
+    rng = np.random.default_rng(0)
+    u = 0.3 * rng.standard_normal((200, 1))
+    y = (lfilter([0.0, 1.0], [1.0, -1.5, 0.7], u[:, 0], zi=[2.0, -1.0])[0] + 0.5
+         + 0.2 * rng.standard_normal(200))
+    model = NLSS2Regressor(n_states=2, estimate_x0=True, refine_linear=False, max_iter=0,
+                           validation_fraction=0.25, n_init=2, random_state=0).fit(u, y)
+    assert model.fell_back_to_linear_
+    # The output networks' biases hold the BLA's output offset; there is no
+    # separate offset to duplicate them.
+    np.testing.assert_array_equal(model.output_offset_, [0.0])
+    np.testing.assert_allclose(model.g_output_biases_, model.bla_.output_offset_)
+    np.testing.assert_allclose(model.predict(u), model.bla_.predict(u), atol=1e-12)
 
 
 def test_mimo_with_sequences_and_holdout():

@@ -13,7 +13,9 @@ initial state, as the BLA estimates it (see
 normalised signals are centred on their means, which are not the levels that
 a record starting out of equilibrium settles about. The kernels never read
 it; this module adds it to their outputs and its identity sensitivity to
-their Jacobian.
+their Jacobian. Terms that add a constant of their own to every output (the
+biases of NLSS2's output networks, see ``Terms.output_constant``) hold the
+offset there instead: a separate ``y0`` would duplicate those parameters.
 """
 
 import math
@@ -49,9 +51,13 @@ class Terms:
     three compiled functions ``evaluate``, ``state_jacobian`` and
     ``parameter_jacobian``, and ``n_state_params``: the number of the
     terms' parameters that enter ``h_x`` (they come first in ``theta_terms``).
+    Terms with a block of shape (n_outputs,) that adds a constant to each
+    output name it ``output_constant``; with the terms' other parameters at
+    zero, the terms are then that constant.
     """
 
     blocks = ()
+    output_constant = None
     spec = np.zeros(1, dtype=np.int64)
     work_size = 0
     n_state_params = 0
@@ -146,15 +152,25 @@ class StateSpaceModel:
         The nonlinear terms; ``None`` for a linear model.
     estimate_x0 : bool, default=False
         Whether the initial state (shared by all sequences) and the output
-        offset end the parameter vector.
+        offset end the parameter vector (the offset only when the terms have
+        no ``output_constant``, which holds it otherwise).
+
+    Attributes
+    ----------
+    offset_block : str or None
+        The block holding the output offset: ``"y0"``, the terms'
+        ``output_constant``, or None without ``estimate_x0``.
     """
 
     def __init__(self, n_states, n_inputs, n_outputs, terms=None, *, estimate_x0=False):
         self.n_states, self.n_inputs, self.n_outputs = n_states, n_inputs, n_outputs
         self.terms = Terms() if terms is None else terms
         self.estimate_x0 = bool(estimate_x0)
+        own_offset = self.terms.output_constant is None
         self.blocks = self.layout(n_states, n_inputs, n_outputs, self.terms.blocks,
-                                  estimate_x0=self.estimate_x0)
+                                  estimate_x0=self.estimate_x0, output_offset=own_offset)
+        self.offset_block = (None if not self.estimate_x0 else "y0" if own_offset
+                             else self.terms.output_constant)
         sizes = [int(np.prod(shape, dtype=np.int64)) for _, shape in self.blocks]
         self.offsets = dict(zip((name for name, _ in self.blocks), np.cumsum([0] + sizes)))
         self.n_params = int(sum(sizes))
@@ -162,15 +178,17 @@ class StateSpaceModel:
         self.n_terms = self.terms.n_params
 
     @staticmethod
-    def layout(n_states, n_inputs, n_outputs, terms_blocks=(), *, estimate_x0=False):
+    def layout(n_states, n_inputs, n_outputs, terms_blocks=(), *, estimate_x0=False,
+               output_offset=True):
         """The parameter blocks ``(name, shape)`` of the model, known before
-        its terms are built: the linear part, the terms' blocks, then x0 and
-        y0 with ``estimate_x0``."""
+        its terms are built: the linear part, the terms' blocks, then x0 with
+        ``estimate_x0``, and y0 too with ``output_offset`` (False for terms with
+        an ``output_constant``)."""
         n, n_u, n_y = n_states, n_inputs, n_outputs
         blocks = [("A", (n, n)), ("B", (n, n_u)), ("C", (n_y, n)), ("D", (n_y, n_u))]
         blocks += list(terms_blocks)
         if estimate_x0:
-            blocks += [("x0", (n,)), ("y0", (n_y,))]
+            blocks += [("x0", (n,))] + ([("y0", (n_y,))] if output_offset else [])
         return blocks
 
     # ---------------------------------------------------------------- layout
@@ -185,8 +203,18 @@ class StateSpaceModel:
 
     @property
     def linear_columns(self):
-        """Indices of A, B, C, D, x0 and y0."""
-        return self.columns("A", "B", "C", "D", "x0", "y0")
+        """Indices of A, B, C, D, x0 and the output offset."""
+        return self.columns("A", "B", "C", "D", "x0", self.offset_block)
+
+    def linear_values(self, theta):
+        """A, B, C, D, x0 and the output offset ``y0`` of ``theta`` (whichever
+        block holds it), keyed by block name, for a ``theta`` whose terms are
+        otherwise off."""
+        values = self.unpack(theta)
+        linear = {name: values[name] for name in ("A", "B", "C", "D", "x0") if name in values}
+        if self.offset_block is not None:
+            linear["y0"] = values[self.offset_block]
+        return linear
 
     @property
     def terms_columns(self):
@@ -213,7 +241,7 @@ class StateSpaceModel:
         one in theta, else zero."""
         if x0 is None:
             if self.estimate_x0:
-                x0 = theta[self.offsets["x0"] : self.offsets["y0"]]
+                x0 = theta[self.offsets["x0"] : self.offsets["x0"] + self.n_states]
             else:
                 x0 = np.zeros(self.n_states)
         x0 = np.asarray(x0, dtype=np.float64)
@@ -245,7 +273,7 @@ class StateSpaceModel:
             self.initial_states(theta, len(starts) - 1, x0), self.estimate_x0,
             _array(jacobian_rows, np.int64), with_local, *_pointers(terms),
         )
-        if self.estimate_x0:
+        if "y0" in self.offsets:
             # The kernels leave the columns of y0 at zero.
             outputs = np.arange(self.n_outputs)
             J[:, outputs, self.offsets["y0"] + outputs] = 1.0
@@ -253,7 +281,7 @@ class StateSpaceModel:
 
     def _with_output_offset(self, theta, Y):
         """The kernels' outputs ``Y`` plus the estimated output offset (in place)."""
-        if self.estimate_x0:
+        if "y0" in self.offsets:
             Y += theta[self.offsets["y0"] :]
         return Y
 

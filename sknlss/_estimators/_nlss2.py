@@ -106,7 +106,8 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
 
     The initial state (when estimated) is the mean of the estimated first
     states of the fitted sequences (the model has one initial state shared by
-    all sequences); the output offset starts at zero.
+    all sequences). The output networks, fitted to the whole output residual,
+    hold its constant in their biases (they are the model's output offset).
     """
     model, U_fit, Y_fit, starts_fit = (context[key] for key in
                                        ("model", "U_fit", "Y_fit", "starts_fit"))
@@ -118,9 +119,6 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
                                 activation, seed))
     if model.estimate_x0:
         values["x0"] = states[starts_fit[:-1]].mean(axis=0)
-        # The output networks, fitted to the whole output residual, hold its
-        # constant in their biases.
-        values["y0"] = np.zeros_like(values["y0"])
     return model.pack(values)
 
 
@@ -162,7 +160,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         Activation of the hidden units.
     estimate_x0 : bool, default=False
         Estimate the initial state shared by all sequences (as in PNLSS-I),
-        and a constant output offset with it (``output_offset_``).
+        and a constant output offset with it (the output networks' biases
+        hold it).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -262,9 +261,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     x0_ : ndarray of shape (n_states,)
         Initial state (zero unless ``estimate_x0``).
     output_offset_ : ndarray of shape (n_outputs,)
-        Constant output offset estimated with ``x0_`` (normalised units, zero
-        unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
-        ``y_offset_``.
+        Zero: the biases of the output networks, ``g_output_biases_``, hold
+        the constant output offset that the other estimators estimate with
+        ``x0_``.
     alpha_ : float
         State-estimation weight used.
     alpha_losses_ : ndarray of shape (len(ALPHA_GRID),)
@@ -279,11 +278,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of free parameters: ``(n_states + n_outputs) * (n_states +
         n_inputs + 1 + n_neurons * (n_states + n_inputs + 2))``, plus
-        ``n_states + n_outputs`` with ``estimate_x0``. For ``n_states=3``,
-        one input, one output and ``n_neurons=2``: 68, or 72 with the initial
-        state and the output offset (the paper counts 71: the offset
-        duplicates the output networks' biases, but the linear model that the
-        fit starts from and may keep needs it to be the BLA).
+        ``n_states`` with ``estimate_x0``. For ``n_states=3``, one input, one
+        output and ``n_neurons=2``: 68, or 71 with the initial state, as the
+        paper counts.
     n_iter_ : int
         Iterations of the kept start.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
@@ -329,8 +326,11 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     -----
     One network per component (rather than one network per function with
     shared hidden units) gives the paper's count of 71 parameters for the
-    Cascaded Tanks model (16 linear, 4 networks of 13 and the initial state),
-    72 with the output offset estimated with the initial state.
+    Cascaded Tanks model (16 linear, 4 networks of 13 and the initial state).
+    With ``estimate_x0``, the output offset that the BLA estimates with the
+    initial state is carried by the output networks' biases, which the linear
+    model the fit starts from (and may keep) sets to it: a separate offset
+    would duplicate them.
 
     Fitting: the linear estimator is fitted on the rows that are not held
     out (and, with ``refine_linear``, refined in the time domain). Then, for
@@ -339,7 +339,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     every network is fitted to its linear-model residual by
     :class:`~sklearn.neural_network.MLPRegressor` (L-BFGS, a different random
     initialisation per start); the initial state starts at the estimated
-    first state, the output offset at zero. Levenberg-Marquardt then
+    first state. Levenberg-Marquardt then
     minimises the simulation error on the fitted rows with the analytic
     Jacobian; with ``validation_fraction``,
     the iterate and the start with the lowest validation error are kept;
@@ -428,6 +428,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         return NetworkTerms(self.n_states, n_inputs, n_outputs, self.n_neurons,
                             self.activation)
 
+    _terms_output_constant = NetworkTerms.output_constant
+
     def _n_terms_params(self, n_inputs, n_outputs):
         return parameter_count(NetworkTerms.layout(self.n_states, n_inputs, n_outputs,
                                                    self.n_neurons))
@@ -464,7 +466,11 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         # The fitted networks can destabilise the model; without their output
         # weights it is the linear model again, and the search can grow them.
         silent = theta.copy()
-        silent[context["model"].columns("f_v", "f_c", "g_v", "g_c")] = 0.0
+        model = context["model"]
+        silent[model.columns("f_v", "f_c", "g_v")] = 0.0
+        # The output biases keep the linear model's output offset.
+        constant = model.columns("g_c")
+        silent[constant] = context["theta"][constant]
         return [theta, silent]
 
     def _set_terms(self, values):

@@ -107,6 +107,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     _label = "model"
     #: The constructor parameters that set the number of parameters.
     _structure_params = ("n_states",)
+    #: The terms' ``output_constant`` (see ``sknlss._core._model.Terms``),
+    #: known before they are built.
+    _terms_output_constant = None
 
     # ------------------------------------------------------------ subclass API
     @abstractmethod
@@ -305,7 +308,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         n_u, n_y = U.shape[1], Y.shape[1]
         n_terms = self._n_terms_params(n_u, n_y)
         n_params = n_terms + parameter_count(StateSpaceModel.layout(
-            self.n_states, n_u, n_y, estimate_x0=self.estimate_x0))
+            self.n_states, n_u, n_y, estimate_x0=self.estimate_x0,
+            output_offset=self._terms_output_constant is None))
         # The largest Jacobian: the smallest hold-out and the shortest transient.
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
                                  validation_fraction=min(self._row_shares(shares)),
@@ -400,7 +404,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values = model.unpack(theta_best)
         self.A_, self.B_, self.C_, self.D_ = (values[k] for k in "ABCD")
         self.x0_ = values["x0"] if self.estimate_x0 else np.zeros(self.n_states)
-        self.output_offset_ = values["y0"] if self.estimate_x0 else np.zeros(Y.shape[1])
+        self.output_offset_ = values.get("y0", np.zeros(Y.shape[1]))
         # The structure the predictions simulate (the initial state is passed).
         self._model = StateSpaceModel(model.n_states, model.n_inputs, model.n_outputs,
                                       self._prediction_terms(model, theta_best, U, starts))
@@ -445,7 +449,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         would get alone.
         """
         theta = self._refined_linear_start(problem_sets[0][max(shares)], theta)
-        linear = problem_sets[0][max(shares)].model.unpack(theta)
+        linear = problem_sets[0][max(shares)].model.linear_values(theta)
         seeds = check_random_state(self.random_state).randint(
             np.iinfo(np.int32).max, size=self.n_init)
         contexts = []
@@ -457,7 +461,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             self._prepare_starts(context)
             contexts.append(context)
         linear_theta = self._linear_model(contexts[0]["model"], theta)
-        linear_values = contexts[0]["model"].unpack(linear_theta)
+        linear_values = contexts[0]["model"].linear_values(linear_theta)
         for problems in problem_sets:
             # A model is judged on the held-out end only where it fits its own
             # rows at least as well as the linear model it must beat.
@@ -587,11 +591,14 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
 
 
 def with_linear_part(model, linear):
-    """The parameters of ``model`` with the linear part (and x0 and y0) of the
-    unpacked ``linear`` and its terms switched off."""
+    """The parameters of ``model`` with the linear part (and x0 and the output
+    offset y0) of ``linear`` (keyed by block name) and its terms switched off
+    (but for the constant that holds the offset, see ``offset_block``)."""
     values = {name: np.zeros(shape) for name, shape in model.blocks}
-    values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0", "y0")
+    values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0")
                   if name in values)
+    if model.offset_block is not None:
+        values[model.offset_block] = linear["y0"]
     return model.pack(values)
 
 

@@ -143,6 +143,8 @@ class NetworkTerms(Terms):
     evaluate = staticmethod(_evaluate)
     state_jacobian = staticmethod(_state_jacobian)
     parameter_jacobian = staticmethod(_parameter_jacobian)
+    # With zero output weights, the output networks are their biases.
+    output_constant = "g_c"
 
     def __init__(self, n_states, n_inputs, n_outputs, n_neurons, activation):
         n_vars = n_states + n_inputs
