@@ -36,8 +36,9 @@ print(f"Cascaded Tanks, data: {source}")
 # Fitting
 # -------
 # Third order, one sigmoid network of two neurons per state and per output,
-# initial state estimated: the paper's 71 parameters, and the output offset
-# estimated with the initial state.
+# initial state estimated: the paper's 71 parameters (the output networks'
+# biases hold the output offset that the other models estimate with the
+# initial state).
 model = NLSS2Regressor(n_states=3, n_neurons=2, estimate_x0=True, random_state=0)
 start = time.perf_counter()
 model.fit(data.X_est, data.y_est)

@@ -13,6 +13,7 @@ from sknlss._core._multistart import fit_from, run_starts
 from sknlss._core._problem import (SimulationErrorProblem, fit_rows, screening_radius,
                                    spectral_radius)
 from sknlss._core._sequences import steady_state_rows
+from sknlss._estimators._nonlinear import with_linear_part
 from sknlss._terms._branches import BranchTerms
 from sknlss._terms._network import NetworkTerms
 from sknlss._terms._polynomial import PolynomialTerms, evaluate_monomials, monomial_exponents
@@ -442,3 +443,32 @@ def test_linear_part_refined_alone_recovers_a_perturbed_model():
     offset = model.columns("g_c")
     np.testing.assert_array_equal(refined[np.setdiff1d(model.terms_columns, offset)], 0.0)
     np.testing.assert_allclose(refined[offset], 0.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("terms, offset_block", [
+    (PolynomialTerms(2, 1, monomial_exponents(2, 1, 2), monomial_exponents(2, 1, 2)), "y0"),
+    (NetworkTerms(2, 1, 1, 2, "tanh"), "g_c"),
+])
+def test_the_output_offset_lives_in_one_block(terms, offset_block):
+    # Terms with a constant of their own per output hold the offset there: a
+    # separate y0 would duplicate it (two equal Jacobian columns).
+    model = StateSpaceModel(2, 1, 1, terms, estimate_x0=True)
+    assert model.offset_block == offset_block
+    assert ("y0" in model.offsets) == (offset_block == "y0")
+    rng = np.random.default_rng(0)
+    linear = {"A": np.array([[0.5, 0.1], [0.0, 0.3]]), "B": np.ones((2, 1)),
+              "C": np.array([[1.0, -1.0]]), "D": np.zeros((1, 1)),
+              "x0": np.array([0.2, -0.1]), "y0": np.array([0.7])}
+    theta = with_linear_part(model, linear)
+    for name, value in model.linear_values(theta).items():
+        np.testing.assert_array_equal(value, linear[name])
+    # The same outputs as the linear model with its offset added.
+    U = rng.standard_normal((50, 1))
+    starts = np.array([0, 50])
+    plain = StateSpaceModel(2, 1, 1)
+    expected = plain.simulate(plain.pack(linear), U, starts, x0=linear["x0"])[0] + 0.7
+    np.testing.assert_allclose(model.simulate(theta, U, starts)[0], expected, atol=1e-14)
+    # A refinement of the linear part frees the offset with it.
+    offset = model.columns(offset_block)
+    assert np.isin(offset, model.linear_columns).all()
+    np.testing.assert_array_equal(theta[offset], [0.7])
