@@ -108,7 +108,8 @@ def fit_initial_state(model, theta, U, Y, x0, *, max_iter):
                               estimate_x0=True)
     rows = fit_rows(U, Y, np.array([0, len(U)]), n_transient=0, validation_fraction=0.0)
     free = with_x0.columns("x0")
-    # The output offset of the fitted model is already in the signals' offsets.
+    # The output offset of the fitted model is already in the signals' offsets
+    # (or in the biases of NLSS2's output networks, which stay as fitted).
     start = with_x0.pack({**model.unpack(theta), "x0": x0, "y0": np.zeros(model.n_outputs)})
     problem = SimulationErrorProblem(with_x0, rows).restricted(start, free)
     return fit_from(problem, [x0, np.zeros_like(x0)], label="initial state",

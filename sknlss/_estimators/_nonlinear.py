@@ -8,8 +8,8 @@ Every nonlinear estimator identifies ``x(t+1) = A x + B u + h_x(x, u)``,
    periodic data);
 2. the Best Linear Approximation on the rows before the held-out tails,
    exposed as ``bla_`` in the user's units;
-3. optionally, the linear part (and x0 and y0) refined on the simulation
-   error with the terms switched off;
+3. optionally, the linear part (and x0 and the output offset) refined on the
+   simulation error with the terms switched off;
 4. one or more starting points of the terms (the estimator's own
    initialisation), each refined by Levenberg-Marquardt on the shared
    :class:`~sknlss._core._problem.SimulationErrorProblem`; the start with the
@@ -206,8 +206,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                 "y0": linear.output_offset}
 
     def _fit_linear_part(self, problem, theta):
-        """``theta`` with its linear part (and x0 and y0) refined on the
-        simulation error, the terms left as they are, and the search's result.
+        """``theta`` with its linear part (and x0 and the output offset) refined
+        on the simulation error, the terms left as they are, and the search's
+        result.
 
         A refinement that takes a stable linear part out of the unit circle is
         not taken (``theta`` is returned as it is, with the result of a search
@@ -231,8 +232,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return refined, result
 
     def _refined_linear_start(self, problem, theta):
-        """The starting parameters with the linear part (and x0 and y0) refined
-        on the simulation error, the terms switched off (with
+        """The starting parameters with the linear part (and x0 and the output
+        offset) refined on the simulation error, the terms switched off (with
         ``refine_linear``)."""
         if not self.refine_linear or self.max_iter == 0:
             return theta
