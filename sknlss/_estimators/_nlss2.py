@@ -300,8 +300,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     fell_back_to_linear_ : bool
         True when no start beat the linear model there, or the record is too
         short for the nonlinear terms (with a
-        :class:`~sknlss.LinearFallbackWarning`): the linear model is kept (its
-        nonlinear terms are zero).
+        :class:`~sknlss.LinearFallbackWarning`): the linear model is kept (the
+        networks' weights are zero; with ``estimate_x0``, the output networks'
+        biases hold the BLA's output offset).
     linear_loss_ : float
         Mean squared simulation error of the linear start on that end.
     refit_n_iter_ : int

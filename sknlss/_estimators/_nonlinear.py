@@ -341,8 +341,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             f"but its cost holds only {n_values} values (n_transient={self.n_transient}, "
             f"validation_fraction={self.validation_fraction!r}): the nonlinear terms "
             "cannot be identified and the linear model is kept (its nonlinear terms "
-            "are zero, its linear part refined on the simulation error where that keeps "
-            "it stable). Use a longer record or a smaller model.",
+            "switched off, its linear part refined on the simulation error where that "
+            "keeps it stable). Use a longer record or a smaller model.",
             LinearFallbackWarning)
         return True
 
