@@ -13,7 +13,6 @@ from sknlss._core._multistart import fit_from, run_starts
 from sknlss._core._problem import (SimulationErrorProblem, fit_rows, screening_radius,
                                    spectral_radius)
 from sknlss._core._sequences import steady_state_rows
-from sknlss._estimators._nonlinear import with_linear_part
 from sknlss._terms._branches import BranchTerms
 from sknlss._terms._network import NetworkTerms
 from sknlss._terms._polynomial import PolynomialTerms, evaluate_monomials, monomial_exponents
@@ -459,7 +458,7 @@ def test_the_output_offset_lives_in_one_block(terms, offset_block):
     linear = {"A": np.array([[0.5, 0.1], [0.0, 0.3]]), "B": np.ones((2, 1)),
               "C": np.array([[1.0, -1.0]]), "D": np.zeros((1, 1)),
               "x0": np.array([0.2, -0.1]), "y0": np.array([0.7])}
-    theta = with_linear_part(model, linear)
+    theta = model.pack_linear(linear)
     for name, value in model.linear_values(theta).items():
         np.testing.assert_array_equal(value, linear[name])
     # The same outputs as the linear model with its offset added.

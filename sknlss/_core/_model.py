@@ -209,12 +209,23 @@ class StateSpaceModel:
     def linear_values(self, theta):
         """A, B, C, D, x0 and the output offset ``y0`` of ``theta`` (whichever
         block holds it), keyed by block name, for a ``theta`` whose terms are
-        otherwise off."""
+        otherwise off: the inverse of :meth:`pack_linear`."""
         values = self.unpack(theta)
         linear = {name: values[name] for name in ("A", "B", "C", "D", "x0") if name in values}
         if self.offset_block is not None:
             linear["y0"] = values[self.offset_block]
         return linear
+
+    def pack_linear(self, linear):
+        """The parameters with the linear part (and x0 and the output offset
+        ``y0``) of ``linear`` (keyed by block name) and the terms switched off,
+        but for the constant that holds the offset (see ``offset_block``)."""
+        values = {name: np.zeros(shape) for name, shape in self.blocks}
+        values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0")
+                      if name in values)
+        if self.offset_block is not None:
+            values[self.offset_block] = linear["y0"]
+        return self.pack(values)
 
     @property
     def terms_columns(self):
@@ -273,7 +284,7 @@ class StateSpaceModel:
             self.initial_states(theta, len(starts) - 1, x0), self.estimate_x0,
             _array(jacobian_rows, np.int64), with_local, *_pointers(terms),
         )
-        if "y0" in self.offsets:
+        if self.offset_block == "y0":
             # The kernels leave the columns of y0 at zero.
             outputs = np.arange(self.n_outputs)
             J[:, outputs, self.offsets["y0"] + outputs] = 1.0
@@ -281,7 +292,7 @@ class StateSpaceModel:
 
     def _with_output_offset(self, theta, Y):
         """The kernels' outputs ``Y`` plus the estimated output offset (in place)."""
-        if "y0" in self.offsets:
+        if self.offset_block == "y0":
             Y += theta[self.offsets["y0"] :]
         return Y
 

@@ -21,7 +21,7 @@ from .._terms._cpd import decouple_polynomial
 from .._validation import Integers
 from ..exceptions import warn_at_caller
 from ._base import _unfitted_on_error
-from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms, with_linear_part
+from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
 from ._pnlss import PNLSSRegressor
 
 # Factors applied to W when the decoupled initial model diverges on the
@@ -468,8 +468,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         # are written in its states; without them that linear part need not
         # even be stable. The model to beat is the BLA the PNLSS started from.
         bla = self.bla_
-        return with_linear_part(model, {"A": bla.A_, "B": bla.B_, "C": bla.C_, "D": bla.D_,
-                                         "x0": bla.x0_, "y0": bla.output_offset_})
+        return model.pack_linear({"A": bla.A_, "B": bla.B_, "C": bla.C_, "D": bla.D_,
+                                  "x0": bla.x0_, "y0": bla.output_offset_})
 
     def _prepare_starts(self, context):
         pnlss, starts, rows = self.pnlss_, context["starts"], context["rows"]

@@ -340,9 +340,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     every network is fitted to its linear-model residual by
     :class:`~sklearn.neural_network.MLPRegressor` (L-BFGS, a different random
     initialisation per start); the initial state starts at the estimated
-    first state. Levenberg-Marquardt then
-    minimises the simulation error on the fitted rows with the analytic
-    Jacobian; with ``validation_fraction``,
+    first state. Levenberg-Marquardt then minimises the simulation error on
+    the fitted rows with the analytic Jacobian; with ``validation_fraction``,
     the iterate and the start with the lowest validation error are kept;
     with ``refit``, that iterate is then refined on all the rows.
     Diagonal rescalings of the states leave the output unchanged, so the

@@ -387,7 +387,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # starts: it sees only rows that none of the starts selects on.
         problem = problem_sets[0][max(shares)]
         model = problem.model
-        theta = with_linear_part(model, linear)
+        theta = model.pack_linear(linear)
         self.refit_n_iter_ = 0
         if self._underdetermined(problem):
             theta_best, result = self._fit_linear_part(problem, self._linear_model(model, theta))
@@ -457,7 +457,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         for problems in problem_sets:
             problem = problems[max(shares)]
             context = {"problem": problem, "model": problem.model,
-                       "theta": with_linear_part(problem.model, linear), "U": U, "Y": Y,
+                       "theta": problem.model.pack_linear(linear), "U": U, "Y": Y,
                        "starts": starts, "rows": problem.rows, "seeds": seeds}
             self._prepare_starts(context)
             contexts.append(context)
@@ -467,7 +467,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             # A model is judged on the held-out end only where it fits its own
             # rows at least as well as the linear model it must beat.
             for start_problem in problems.values():
-                reference = with_linear_part(start_problem.model, linear_values)
+                reference = start_problem.model.pack_linear(linear_values)
                 start_problem.fit_loss_limit = (start_problem.fit_loss(reference)
                                                 * (1 + _ROUNDING_MARGIN))
         k = len(problem_sets)
@@ -589,18 +589,6 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
         candidates = estimator._starting_points(context, start, seed)
         theta, result = fit_from(problem, candidates, label=label, **options)
     return theta, result, [(warning.message, warning.category) for warning in caught]
-
-
-def with_linear_part(model, linear):
-    """The parameters of ``model`` with the linear part (and x0 and the output
-    offset y0) of ``linear`` (keyed by block name) and its terms switched off
-    (but for the constant that holds the offset, see ``offset_block``)."""
-    values = {name: np.zeros(shape) for name, shape in model.blocks}
-    values.update((name, linear[name]) for name in ("A", "B", "C", "D", "x0")
-                  if name in values)
-    if model.offset_block is not None:
-        values[model.offset_block] = linear["y0"]
-    return model.pack(values)
 
 
 #: How each named extrapolation continues the terms beyond the range of their
