@@ -401,6 +401,19 @@ def test_fit_from_skips_candidates_that_diverge():
         fit_from(problem, [exploding], label="test", max_iter=3)
 
 
+def test_fit_from_holds_the_held_parameters():
+    problem, theta = _held_out_problem()[:2]
+    start = theta.copy()
+    start[problem.model.columns("C")] *= 0.5
+    held = problem.model.columns("A", "C")
+    problem.held = held
+    theta_kept, result = fit_from(problem, [start], label="test", max_iter=5)
+    np.testing.assert_array_equal(theta_kept[held], start[held])
+    assert not np.array_equal(theta_kept, start)
+    np.testing.assert_array_equal(result.theta, theta_kept)
+    assert result.loss_history[-1] < result.loss_history[0]
+
+
 def _start(value, fail=False):
     if fail:
         raise ValueError("a start that fails")

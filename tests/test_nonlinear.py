@@ -83,6 +83,21 @@ def test_estimate_x0(name, record):
     assert rms_error(y_moving[:20], predicted[:20]) < np.std(y_moving)
 
 
+@pytest.mark.parametrize("name", FACTORIES)
+def test_estimate_x0_with_a_transient_left_out(name, record):
+    # After n_transient samples the initial state's effect has died out: the
+    # search holds it where it starts instead of fitting the noise with it.
+    u, y = record
+    y_moving = _duffing(u, x0=(2.0, 1.5)) + 3.0
+    model = FACTORIES[name](n_states=2, estimate_x0=True, n_transient=100).fit(u, y_moving)
+    if name != "NLSS2":
+        # NLSS2's starts take their initial state from the estimated states.
+        np.testing.assert_array_equal(model.x0_, model.bla_.x0_)
+    assert not model.fell_back_to_linear_
+    error = rms_error(y_moving[100:], model.predict(u)[100:])
+    assert error < 0.5 * rms_error(y_moving[100:], model.bla_.predict(u)[100:])
+
+
 def _terms_count(model):
     """Parameters beyond those of the (x0-estimating) linear model."""
     linear = sum(getattr(model, name).size

@@ -258,11 +258,15 @@ class SimulationErrorProblem:
     x0 : ndarray of shape (n_states,), default=None
         Initial state of every sequence when the model does not estimate it
         (zero when None).
+    held : ndarray of int, default=None
+        Parameters that a search holds at their starting values (see
+        :func:`~sknlss._core._multistart.fit_from`); None holds none.
     """
 
     def __init__(self, model, rows, *, frequency_period=None, stability_penalty=0.0,
-                 weight_decay=0.0, x0=None):
+                 weight_decay=0.0, x0=None, held=None):
         self.model = model
+        self.held = np.zeros(0, dtype=np.int64) if held is None else np.asarray(held)
         self.rows = rows
         self.U, self.Y, self.starts = rows.U, rows.Y, rows.starts
         self.fit_rows, self.val_rows = rows.fit_rows, rows.val_rows
@@ -479,14 +483,20 @@ class _Restricted:
         self.validation_loss = (None if problem.validation_loss is None
                                 else self._validation_loss)
 
-    def _full(self, phi):
+    def full(self, phi):
+        """The whole parameter vector for the free parameters ``phi``."""
         full = self._base.copy()
         full[self._free] = phi
         return full
 
+    def free_part(self, values):
+        """The entries (columns, for a Jacobian) of ``values`` that belong to
+        the free parameters."""
+        return values[..., self._free]
+
     def residual(self, phi, jacobian):
-        r, J = self._problem.residual(self._full(phi), jacobian)
-        return r, (J[:, self._free] if J is not None else None)
+        r, J = self._problem.residual(self.full(phi), jacobian)
+        return r, (self.free_part(J) if J is not None else None)
 
     def _validation_loss(self, phi):
-        return self._problem.validation_loss(self._full(phi))
+        return self._problem.validation_loss(self.full(phi))

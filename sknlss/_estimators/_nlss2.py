@@ -235,7 +235,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        Without ``estimate_x0`` and ``period``, the cost also skips the
+        With ``estimate_x0``, the search holds the initial state at its
+        starting value, which the cost then hardly determines. Without
+        ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence).
     verbose : int, default=0

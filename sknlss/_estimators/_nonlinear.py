@@ -205,8 +205,25 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return {"A": linear.A, "B": linear.B, "C": linear.C, "D": linear.D, "x0": linear.x0,
                 "y0": linear.output_offset}
 
+    def _problem(self, terms, rows):
+        """The simulation-error problem of a model with ``terms`` on ``rows``.
+
+        With ``estimate_x0`` and a transient left out of the cost
+        (``n_transient``, which are also the samples prepended for the steady
+        state), the search holds the initial state at its starting value (the
+        BLA's least-squares estimate): its effect has nearly died out when the
+        cost starts, so a search would move it far away to fit the noise, and
+        the model would then run away over the transient.
+        """
+        model = StateSpaceModel(self.n_states, rows.U.shape[1], rows.Y.shape[1], terms,
+                                estimate_x0=self.estimate_x0)
+        return SimulationErrorProblem(
+            model, rows, frequency_period=self.period if self.cost == "frequency" else None,
+            stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
+            held=model.columns("x0") if self.n_transient else None)
+
     def _fit_linear_part(self, problem, theta):
-        """``theta`` with its linear part (and x0 and the output offset) refined
+        """``theta`` with its linear part (and x0, unless held, and the output offset) refined
         on the simulation error, the terms left as they are, and the search's
         result.
 
@@ -216,7 +233,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         grows over its length, and such a model runs away beyond it.
         """
         model = problem.model
-        free = model.linear_columns
+        free = np.setdiff1d(model.linear_columns, problem.held)
         options = dict(self._lm_options(model), n_drop=model.n_states**2)
         restricted = problem.restricted(theta, free)
         label = f"{self._label} (linear part)"
@@ -376,13 +393,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         rows = {share: fit_rows(U, Y, starts, n_transient=self.fit_transient_,
                                 validation_fraction=share, steady_state_period=self.period)
                 for share in self._row_shares(shares)}
-        problem_sets = [{share: SimulationErrorProblem(
-            StateSpaceModel(self.n_states, U.shape[1], Y.shape[1], terms,
-                            estimate_x0=self.estimate_x0),
-            rows[share],
-            frequency_period=self.period if self.cost == "frequency" else None,
-            stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
-        ) for share in rows} for terms in self._candidate_terms(U.shape[1], Y.shape[1])]
+        problem_sets = [{share: self._problem(terms, rows[share]) for share in rows}
+                        for terms in self._candidate_terms(U.shape[1], Y.shape[1])]
         # The problem with the largest hold-out serves the work shared by all
         # starts: it sees only rows that none of the starts selects on.
         problem = problem_sets[0][max(shares)]
