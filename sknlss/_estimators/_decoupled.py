@@ -122,7 +122,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state (shared by all sequences, forwarded to the
         PNLSS model) and a constant output offset with it
-        (``output_offset_``); ``predict`` then starts from ``x0_``.
+        (``output_offset_``); ``predict`` then starts from ``x0_``. A long
+        ``n_transient`` holds it (see there).
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
         ``n_states``, ``estimate_x0``, ``period``, ``cost``,
@@ -197,8 +198,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, the search holds the initial state at its
-        starting value, which the cost then hardly determines. Without
+        With ``estimate_x0``, a transient that outlasts the settling time of
+        the linear start's slowest mode (to 1 %) leaves the initial state
+        undetermined: the search then holds it at its starting value. Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence).
@@ -454,10 +456,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     def _prediction_terms(self, model, theta, U, starts):
         return ranged_prediction_terms(model, theta, U, starts, self.extrapolation)
 
-    def _n_drop(self, model):
+    def _n_drop(self, model, x0_held):
         # Similarity transforms of the states and the scaling of each branch's
         # input and output leave the simulated output unchanged.
-        return model.n_states**2 + 2 * self.rank
+        return super()._n_drop(model, x0_held) + 2 * self.rank
 
     def _linear_start(self, U, Y, starts, fit_mask):
         pnlss = self.pnlss_

@@ -319,7 +319,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences, and a constant
         output offset with it (``output_offset_``); ``predict`` then starts
-        from the fitted ``x0_``.
+        from the fitted ``x0_``. A long ``n_transient`` holds it (see there).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -345,7 +345,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         with the record: it restrains the terms on a short record and fades on
         a long one.
     refine_linear : bool, default=False
-        Refine A, B, C, D (and x0 and the output offset) on the simulation
+        Refine A, B, C, D (and x0, unless held, and the output offset) on the simulation
         error before the branches are initialised, unless that would make a
         stable linear part unstable.
     bla : BLAEstimator, default=None
@@ -390,8 +390,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, the search holds the initial state at its
-        starting value, which the cost then hardly determines. Without
+        With ``estimate_x0``, a transient that outlasts the settling time of
+        the linear start's slowest mode (to 1 %) leaves the initial state
+        undetermined: the search then holds it at its starting value. Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence): a record rarely starts at rest.
@@ -563,12 +564,12 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         return ranged_prediction_terms(model, theta, U, starts,
                                        _continuation(self.extrapolation, model.terms.basis))
 
-    def _n_drop(self, model):
+    def _n_drop(self, model, x0_held):
         # Similarity transforms of the states, the scaling of each branch's
         # output and, for a power basis, of each branch's input leave the
         # simulated output unchanged.
         per_branch = 2 if isinstance(model.terms.basis, PolynomialBasis) else 1
-        return model.n_states**2 + per_branch * self.n_branches
+        return super()._n_drop(model, x0_held) + per_branch * self.n_branches
 
     def _start_terms(self, context, start, seed):
         """Branch directions of a start and its least-squares terms.

@@ -161,7 +161,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state shared by all sequences (as in PNLSS-I),
         and a constant output offset with it (the output networks' biases
-        hold it).
+        hold it). A long ``n_transient`` holds it (see there).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -188,8 +188,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         a long one.
     refine_linear : bool, default=True
         Before estimating the states, refine the linear model by minimising
-        its simulation error (with its own initial state and output offset
-        when ``estimate_x0``), keeping the iterate best on the validation
+        its simulation error (with its own initial state, unless held, and
+        output offset when ``estimate_x0``), keeping the iterate best on the validation
         rows, unless that would make a stable linear part unstable.
         This makes the initialisation less dependent on the details of the
         frequency-domain BLA.
@@ -235,8 +235,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, the search holds the initial state at its
-        starting value, which the cost then hardly determines. Without
+        With ``estimate_x0``, a transient that outlasts the settling time of
+        the linear start's slowest mode (to 1 %) leaves the initial state
+        undetermined: the search then holds it at its starting value. Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence).
@@ -436,10 +437,11 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         return parameter_count(NetworkTerms.layout(self.n_states, n_inputs, n_outputs,
                                                    self.n_neurons))
 
-    def _n_drop(self, model):
+    def _n_drop(self, model, x0_held):
         # Diagonal rescalings of the states compensated in the networks'
-        # weights leave the output unchanged; the weight decay fixes the scale.
-        return 0 if self.weight_decay else model.n_states
+        # weights leave the output unchanged; the weight decay fixes the
+        # scale, and so does a held initial state.
+        return 0 if self.weight_decay or x0_held else model.n_states
 
     def _prepare_starts(self, context):
         problem, rows = context["problem"], context["rows"]

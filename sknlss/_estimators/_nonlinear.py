@@ -8,7 +8,7 @@ Every nonlinear estimator identifies ``x(t+1) = A x + B u + h_x(x, u)``,
    periodic data);
 2. the Best Linear Approximation on the rows before the held-out tails,
    exposed as ``bla_`` in the user's units;
-3. optionally, the linear part (and x0 and the output offset) refined on the
+3. optionally, the linear part (and x0, unless held, and the output offset) refined on the
    simulation error with the terms switched off;
 4. one or more starting points of the terms (the estimator's own
    initialisation), each refined by Levenberg-Marquardt on the shared
@@ -148,10 +148,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         the estimation record: the fitted terms themselves by default."""
         return model.terms
 
-    def _n_drop(self, model):
+    def _n_drop(self, model, x0_held):
         """Directions of the parameter space that leave the output unchanged
-        (discarded from the Levenberg-Marquardt step)."""
-        return model.n_states**2
+        (discarded from the Levenberg-Marquardt step); ``x0_held``: whether
+        the search holds the initial state."""
+        return _similarity_directions(model, x0_held)
 
     def _centred(self):
         """Whether the signals are centred (else only scaled)."""
@@ -205,22 +206,25 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return {"A": linear.A, "B": linear.B, "C": linear.C, "D": linear.D, "x0": linear.x0,
                 "y0": linear.output_offset}
 
-    def _problem(self, terms, rows):
-        """The simulation-error problem of a model with ``terms`` on ``rows``.
+    def _holds_x0(self, A):
+        """Whether the search holds the initial state at its starting value:
+        with ``estimate_x0``, when the transient left out of the cost
+        (``n_transient``, also the samples prepended for the steady state)
+        outlasts the settling time of the linear start's slowest mode. The
+        state's effect has then died out where the cost starts: a search would
+        move it far away to fit the noise, and the model would run away over
+        the transient."""
+        return self.estimate_x0 and 0 < self.n_transient and _settling_time(A) <= self.n_transient
 
-        With ``estimate_x0`` and a transient left out of the cost
-        (``n_transient``, which are also the samples prepended for the steady
-        state), the search holds the initial state at its starting value (the
-        BLA's least-squares estimate): its effect has nearly died out when the
-        cost starts, so a search would move it far away to fit the noise, and
-        the model would then run away over the transient.
-        """
+    def _problem(self, terms, rows, x0_held):
+        """The simulation-error problem of a model with ``terms`` on ``rows``;
+        with ``x0_held``, the search holds the initial state."""
         model = StateSpaceModel(self.n_states, rows.U.shape[1], rows.Y.shape[1], terms,
                                 estimate_x0=self.estimate_x0)
         return SimulationErrorProblem(
             model, rows, frequency_period=self.period if self.cost == "frequency" else None,
             stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
-            held=model.columns("x0") if self.n_transient else None)
+            held=model.columns("x0") if x0_held else None)
 
     def _fit_linear_part(self, problem, theta):
         """``theta`` with its linear part (and x0, unless held, and the output offset) refined
@@ -234,7 +238,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         """
         model = problem.model
         free = np.setdiff1d(model.linear_columns, problem.held)
-        options = dict(self._lm_options(model), n_drop=model.n_states**2)
+        options = dict(self._lm_options(problem),
+                       n_drop=_similarity_directions(model, problem.held.size > 0))
         restricted = problem.restricted(theta, free)
         label = f"{self._label} (linear part)"
         refined = theta.copy()
@@ -269,8 +274,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     def _record_start(self, context, start, seed):
         """Record what the kept start's initialisation found (nothing by default)."""
 
-    def _lm_options(self, model):
-        return dict(max_iter=self.max_iter, tol=self.tol, n_drop=self._n_drop(model),
+    def _lm_options(self, problem):
+        return dict(max_iter=self.max_iter, tol=self.tol,
+                    n_drop=self._n_drop(problem.model, problem.held.size > 0),
                     n_iter_no_change=self.n_iter_no_change, verbose=self.verbose)
 
     def _validation_shares(self, starts):
@@ -293,17 +299,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         model's slowest pole (a record rarely starts at rest)."""
         if self.estimate_x0 or self.period is not None:
             return self.n_transient
-        radius = spectral_radius(A)
+        # A mode that does not decay never settles (the decoupled model starts
+        # from a PNLSS model's linear part, which may grow).
         limit = int(_MAX_TRANSIENT_SHARE * np.min(np.diff(starts)))
-        if radius >= 1.0:
-            # A mode that does not decay never settles (the decoupled model
-            # starts from a PNLSS model's linear part, which may grow).
-            settling = limit
-        elif radius > 0.0:
-            settling = int(np.ceil(np.log(_SETTLED) / np.log(radius)))
-        else:
-            settling = 0
-        return max(self.n_transient, min(settling, limit))
+        return max(self.n_transient, min(_settling_time(A), limit))
 
     def _structure(self):
         """The structure parameters and their values, for messages."""
@@ -393,7 +392,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         rows = {share: fit_rows(U, Y, starts, n_transient=self.fit_transient_,
                                 validation_fraction=share, steady_state_period=self.period)
                 for share in self._row_shares(shares)}
-        problem_sets = [{share: self._problem(terms, rows[share]) for share in rows}
+        x0_held = self._holds_x0(linear["A"])
+        problem_sets = [{share: self._problem(terms, rows[share], x0_held) for share in rows}
                         for terms in self._candidate_terms(U.shape[1], Y.shape[1])]
         # The problem with the largest hold-out serves the work shared by all
         # starts: it sees only rows that none of the starts selects on.
@@ -488,7 +488,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             _fit_start,
             [(self, contexts[c], problem_sets[c][share], j, seed,
               f"{self._label} start {i}" if self.n_init > 1 else self._label,
-              self._lm_options(contexts[c]["model"]))
+              self._lm_options(problem_sets[c][share]))
              for i, (c, j, share, seed) in enumerate(runs)],
             n_jobs=self.n_jobs,
         )
@@ -548,7 +548,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                 warnings.simplefilter("ignore", ConvergenceWarning)
                 refitted, result = fit_from(problem, [theta],
                                             label=f"{self._label} (refit on all rows)",
-                                            **self._lm_options(problem.model))
+                                            **self._lm_options(problem))
         except START_ERRORS:
             return theta
         if not stays_bounded(problem, refitted):
@@ -620,6 +620,25 @@ def ranged_prediction_terms(model, theta, U, starts, extrapolation):
     S = np.hstack([X, U])
     return model.terms.with_input_range(model.unpack(theta), S[np.all(np.isfinite(S), axis=1)],
                                         **_CONTINUATIONS[extrapolation])
+
+
+def _settling_time(A):
+    """Samples over which the slowest mode of ``A`` decays to ``_SETTLED`` of
+    its size (inf when it does not decay)."""
+    radius = spectral_radius(A)
+    if radius >= 1.0:
+        return np.inf
+    if radius > 0.0:
+        return int(np.ceil(np.log(_SETTLED) / np.log(radius)))
+    return 0
+
+
+def _similarity_directions(model, x0_held):
+    """Directions in which a similarity transform of the states leaves the
+    output unchanged: ``n**2``, or the ``n**2 - n`` transforms that keep a
+    held initial state."""
+    n = model.n_states
+    return n * n - (n if x0_held else 0)
 
 
 def n_cost_values(problem):

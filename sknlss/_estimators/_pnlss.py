@@ -67,7 +67,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences (PNLSS-I), and
         a constant output offset with it (``output_offset_``); ``predict``
-        then starts from the fitted ``x0_``.
+        then starts from the fitted ``x0_``. A long ``n_transient`` holds
+        it (see there).
     center : bool, default=True
         Expand the polynomials around the mean of the signals (zero mean, unit
         standard deviation) instead of around the signals' own zero (only
@@ -78,8 +79,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         records that do not start at rest; without it, a polynomial system
         whose zero is a rest state is exactly representable.
     refine_linear : bool, default=False
-        Before the nonlinear terms are freed, refine A, B, C, D (and x0 and
-        the output offset) on the same cost with E = F = 0, unless that
+        Before the nonlinear terms are freed, refine A, B, C, D (and x0,
+        unless held, and the output offset) on the same cost with E = F = 0, unless that
         would make a stable linear part unstable. This recovers from a poor
         nonparametric BLA (short or noisy records); ``False`` starts the
         nonlinear optimisation from the BLA itself, as in the paper.
@@ -153,8 +154,9 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, the search holds the initial state at its
-        starting value, which the cost then hardly determines. Without
+        With ``estimate_x0``, a transient that outlasts the settling time of
+        the linear start's slowest mode (to 1 %) leaves the initial state
+        undetermined: the search then holds it at its starting value. Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence): a record rarely starts at rest.
