@@ -54,7 +54,7 @@ from sknlss.benchmarks import _fit_and_score
 
 #: Number of states of each simulated system's models (for the drive, whose
 #: loop holds four, chosen among 2-4 on fresh draws: see doc/benchmarks.rst).
-SIMULATED = {"wiener_hammerstein": 4, "duffing": 2, "bouc_wen": 3, "closed_loop_drive": 2}
+SIMULATED = {"wiener_hammerstein": 4, "duffing": 2, "bouc_wen": 3, "closed_loop_drive": 4}
 
 
 def _models(n_states, estimate_x0=False, tanks=False):
