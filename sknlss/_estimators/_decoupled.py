@@ -123,7 +123,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Estimate the initial state (shared by all sequences, forwarded to the
         PNLSS model) and a constant output offset with it
         (``output_offset_``); ``predict`` then starts from ``x0_``. A long
-        ``n_transient`` holds it (see there).
+        ``n_transient`` holds it (see ``n_transient``).
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
         ``n_states``, ``estimate_x0``, ``period``, ``cost``,
@@ -198,9 +198,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient that outlasts the settling time of
-        the linear start's slowest mode (to 1 %) leaves the initial state
-        undetermined: the search then holds it at its starting value. Without
+        With ``estimate_x0``, a transient at least as long as the settling
+        time of the slowest mode of the PNLSS model's ``A_`` (to 1 %; never
+        when that mode does not decay) leaves the initial state undetermined:
+        the search then holds it at the PNLSS model's ``x0_``. Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence).
@@ -298,7 +299,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     Scaling a branch's input or output direction (with the inverse scaling
     of its coefficients) and similarity transforms of
     the states leave the model unchanged; the re-optimisation discards these
-    ``n^2 + 2 r`` directions.
+    ``n^2 + 2 r`` directions (``n^2 - n + 2 r`` when a long ``n_transient``
+    holds the initial state: only the similarity transforms that keep it).
 
     Examples
     --------

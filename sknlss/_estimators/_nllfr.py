@@ -319,7 +319,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences, and a constant
         output offset with it (``output_offset_``); ``predict`` then starts
-        from the fitted ``x0_``. A long ``n_transient`` holds it (see there).
+        from the fitted ``x0_``. A long ``n_transient`` holds it (see
+        ``n_transient``).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -390,9 +391,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient that outlasts the settling time of
-        the linear start's slowest mode (to 1 %) leaves the initial state
-        undetermined: the search then holds it at its starting value. Without
+        With ``estimate_x0``, a transient at least as long as the settling
+        time of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
+        undetermined: the search then holds it at its starting value (see the
+        user guide). Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence): a record rarely starts at rest.

@@ -161,7 +161,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state shared by all sequences (as in PNLSS-I),
         and a constant output offset with it (the output networks' biases
-        hold it). A long ``n_transient`` holds it (see there).
+        hold it). A long ``n_transient`` holds it (see ``n_transient``).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -235,9 +235,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient that outlasts the settling time of
-        the linear start's slowest mode (to 1 %) leaves the initial state
-        undetermined: the search then holds it at its starting value. Without
+        With ``estimate_x0``, a transient at least as long as the settling
+        time of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
+        undetermined: the search then holds it at its starting value (see the
+        user guide). Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence).
@@ -342,14 +343,15 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     (paper eq. 14, by a banded least-squares solve);
     every network is fitted to its linear-model residual by
     :class:`~sklearn.neural_network.MLPRegressor` (L-BFGS, a different random
-    initialisation per start); the initial state starts at the estimated
-    first state. Levenberg-Marquardt then minimises the simulation error on
+    initialisation per start); the initial state starts at the mean of the
+    estimated first states of the sequences (and stays there when a long
+    ``n_transient`` holds it). Levenberg-Marquardt then minimises the simulation error on
     the fitted rows with the analytic Jacobian; with ``validation_fraction``,
     the iterate and the start with the lowest validation error are kept;
     with ``refit``, that iterate is then refined on all the rows.
     Diagonal rescalings of the states leave the output unchanged, so the
     ``n_states`` smallest singular directions of the Jacobian are dropped
-    (unless ``weight_decay`` fixes the scale).
+    (unless ``weight_decay`` or a held initial state fixes the scale).
 
     On the Cascaded Tanks benchmark (``n_states=3``, ``estimate_x0=True``,
     ``validation_fraction=0.3``), the result depends strongly on the linear

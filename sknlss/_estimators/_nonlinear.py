@@ -254,8 +254,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return refined, result
 
     def _refined_linear_start(self, problem, theta):
-        """The starting parameters with the linear part (and x0 and the output
-        offset) refined on the simulation error, the terms switched off (with
+        """The starting parameters with the linear part (and x0, unless held,
+        and the output offset) refined on the simulation error, the terms switched off (with
         ``refine_linear``)."""
         if not self.refine_linear or self.max_iter == 0:
             return theta

@@ -68,7 +68,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         Estimate the initial state, shared by all sequences (PNLSS-I), and
         a constant output offset with it (``output_offset_``); ``predict``
         then starts from the fitted ``x0_``. A long ``n_transient`` holds
-        it (see there).
+        it (see ``n_transient``).
     center : bool, default=True
         Expand the polynomials around the mean of the signals (zero mean, unit
         standard deviation) instead of around the signals' own zero (only
@@ -154,9 +154,10 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient that outlasts the settling time of
-        the linear start's slowest mode (to 1 %) leaves the initial state
-        undetermined: the search then holds it at its starting value. Without
+        With ``estimate_x0``, a transient at least as long as the settling
+        time of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
+        undetermined: the search then holds it at its starting value (see the
+        user guide). Without
         ``estimate_x0`` and ``period``, the cost also skips the
         settling time of the linear model's slowest pole (to 1 %, at most a
         tenth of the shortest sequence): a record rarely starts at rest.
