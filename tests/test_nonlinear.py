@@ -90,13 +90,20 @@ def test_estimate_x0_with_a_transient_left_out(name, record):
     # it starts instead of fitting the noise with it.
     u, y = record
     y_moving = _duffing(u, x0=(2.0, 1.5)) + 3.0
-    model = FACTORIES[name](n_states=2, estimate_x0=True, n_transient=100).fit(u, y_moving)
-    if name != "NLSS2":
-        # NLSS2's starts take their initial state from the estimated states.
-        np.testing.assert_array_equal(model.x0_, model.bla_.x0_)
-    assert not model.fell_back_to_linear_
-    error = rms_error(y_moving[100:], model.predict(u)[100:])
-    assert error < 0.5 * rms_error(y_moving[100:], model.bla_.predict(u)[100:])
+    ratios = []
+    for seed in range(3):
+        model = FACTORIES[name](n_states=2, estimate_x0=True, n_transient=100).set_params(
+            max_iter=30, random_state=seed).fit(u, y_moving)
+        if name != "NLSS2":
+            # NLSS2's starts take their initial state from the estimated states.
+            np.testing.assert_array_equal(model.x0_, model.bla_.x0_)
+        assert not model.fell_back_to_linear_
+        ratios.append(rms_error(y_moving[100:], model.predict(u)[100:])
+                      / rms_error(y_moving[100:], model.bla_.predict(u)[100:]))
+    # Measured over random states 0-4 (one and two BLAS threads alike), the
+    # medians of three are below 0.29 (NLSS2's, 0.14 to 0.44 per fit), the
+    # others' below 0.02; with x0 freed, every fit fell back (ratio 1).
+    assert np.median(ratios) < 0.5
     # After 5 samples it still shows, and the search fits it.
     short = FACTORIES[name](n_states=2, estimate_x0=True, n_transient=5, n_init=1).fit(
         u, y_moving)

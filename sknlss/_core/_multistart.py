@@ -50,7 +50,7 @@ def fit_from(problem, candidates, *, label, **options):
     Parameters
     ----------
     problem : SimulationErrorProblem
-        The parameters in its ``held`` (if any) keep their starting values.
+        The parameters in its ``held`` keep their starting values.
     candidates : iterable of ndarray
         Starting points, tried in turn until one gives a finite residual and
         Jacobian (e.g. a model, then the same with its nonlinear terms
@@ -78,8 +78,8 @@ def fit_from(problem, candidates, *, label, **options):
             f"{label}: no starting point can be simulated on the estimation data (X, y)."
         )
     searched, start = problem, theta0
-    held = getattr(problem, "held", ())
-    if len(held):
+    held = problem.held
+    if held.size:
         # The search steps in the other parameters only.
         searched = problem.restricted(theta0, np.setdiff1d(np.arange(theta0.size), held))
         start, initial = searched.free_part(theta0), (initial[0], searched.free_part(initial[1]))
@@ -87,7 +87,7 @@ def fit_from(problem, candidates, *, label, **options):
                                  validation_loss=searched.validation_loss, label=label,
                                  initial=initial, n_residuals=problem.n_residuals,
                                  **options)
-    if len(held):
+    if held.size:
         result.theta = searched.full(result.theta)
     return result.theta, result
 

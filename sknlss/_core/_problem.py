@@ -477,6 +477,9 @@ def _mean_squared_error(Y_model, Y, rows):
 class _Restricted:
     """A problem in a subset of its parameters (see ``SimulationErrorProblem.restricted``)."""
 
+    #: The parameters it does not free are outside its vector: it holds none.
+    held = np.zeros(0, dtype=np.int64)
+
     def __init__(self, problem, theta, free):
         self._problem, self._base, self._free = problem, theta.copy(), free
         self.n_residuals = problem.n_residuals

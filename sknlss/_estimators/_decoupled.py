@@ -198,13 +198,13 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient at least as long as the settling
-        time of the slowest mode of the PNLSS model's ``A_`` (to 1 %; never
-        when that mode does not decay) leaves the initial state undetermined:
-        the search then holds it at the PNLSS model's ``x0_``. Without
-        ``estimate_x0`` and ``period``, the cost also skips the
-        settling time of the linear model's slowest pole (to 1 %, at most a
-        tenth of the shortest sequence).
+        With ``estimate_x0``, a transient at least as long as the settling time
+        of the slowest mode of the PNLSS model's ``A_`` (to 1 %; never when
+        that mode does not decay) leaves the initial state undetermined: the
+        search then holds it at the PNLSS model's ``x0_``. Without
+        ``estimate_x0`` and ``period``, the cost also skips the settling time
+        of the linear model's slowest pole (to 1 %, at most a tenth of the
+        shortest sequence).
     verbose : int, default=0
         Print the progress of the optimisation.
 
@@ -458,10 +458,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     def _prediction_terms(self, model, theta, U, starts):
         return ranged_prediction_terms(model, theta, U, starts, self.extrapolation)
 
-    def _n_drop(self, model, x0_held):
+    def _n_drop(self, problem):
         # Similarity transforms of the states and the scaling of each branch's
         # input and output leave the simulated output unchanged.
-        return super()._n_drop(model, x0_held) + 2 * self.rank
+        return super()._n_drop(problem) + 2 * self.rank
 
     def _linear_start(self, U, Y, starts, fit_mask):
         pnlss = self.pnlss_

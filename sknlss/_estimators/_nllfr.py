@@ -346,9 +346,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         with the record: it restrains the terms on a short record and fades on
         a long one.
     refine_linear : bool, default=False
-        Refine A, B, C, D (and x0, unless held, and the output offset) on the simulation
-        error before the branches are initialised, unless that would make a
-        stable linear part unstable.
+        Refine A, B, C, D (and x0, unless held, and the output offset) on the
+        simulation error before the branches are initialised, unless that
+        would make a stable linear part unstable.
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
         this model's ``n_states``, ``estimate_x0`` and (if its own is None)
@@ -391,13 +391,12 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient at least as long as the settling
-        time of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
+        With ``estimate_x0``, a transient at least as long as the settling time
+        of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
         undetermined: the search then holds it at its starting value (see the
-        user guide). Without
-        ``estimate_x0`` and ``period``, the cost also skips the
-        settling time of the linear model's slowest pole (to 1 %, at most a
-        tenth of the shortest sequence): a record rarely starts at rest.
+        user guide). Without ``estimate_x0`` and ``period``, the cost also
+        skips the settling time of the linear model's slowest pole (to 1 %, at
+        most a tenth of the shortest sequence): a record rarely starts at rest.
     verbose : int, default=0
         Print the progress of the optimisation.
 
@@ -566,12 +565,12 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         return ranged_prediction_terms(model, theta, U, starts,
                                        _continuation(self.extrapolation, model.terms.basis))
 
-    def _n_drop(self, model, x0_held):
+    def _n_drop(self, problem):
         # Similarity transforms of the states, the scaling of each branch's
         # output and, for a power basis, of each branch's input leave the
         # simulated output unchanged.
-        per_branch = 2 if isinstance(model.terms.basis, PolynomialBasis) else 1
-        return super()._n_drop(model, x0_held) + per_branch * self.n_branches
+        per_branch = 2 if isinstance(problem.model.terms.basis, PolynomialBasis) else 1
+        return super()._n_drop(problem) + per_branch * self.n_branches
 
     def _start_terms(self, context, start, seed):
         """Branch directions of a start and its least-squares terms.

@@ -189,8 +189,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     refine_linear : bool, default=True
         Before estimating the states, refine the linear model by minimising
         its simulation error (with its own initial state, unless held, and
-        output offset when ``estimate_x0``), keeping the iterate best on the validation
-        rows, unless that would make a stable linear part unstable.
+        output offset when ``estimate_x0``), keeping the iterate best on the
+        validation rows, unless that would make a stable linear part unstable.
         This makes the initialisation less dependent on the details of the
         frequency-domain BLA.
     bla : BLAEstimator, default=None
@@ -235,13 +235,12 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient at least as long as the settling
-        time of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
+        With ``estimate_x0``, a transient at least as long as the settling time
+        of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
         undetermined: the search then holds it at its starting value (see the
-        user guide). Without
-        ``estimate_x0`` and ``period``, the cost also skips the
-        settling time of the linear model's slowest pole (to 1 %, at most a
-        tenth of the shortest sequence).
+        user guide). Without ``estimate_x0`` and ``period``, the cost also
+        skips the settling time of the linear model's slowest pole (to 1 %, at
+        most a tenth of the shortest sequence).
     verbose : int, default=0
         Print the progress of the optimisation when positive.
 
@@ -345,8 +344,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     :class:`~sklearn.neural_network.MLPRegressor` (L-BFGS, a different random
     initialisation per start); the initial state starts at the mean of the
     estimated first states of the sequences (and stays there when a long
-    ``n_transient`` holds it). Levenberg-Marquardt then minimises the simulation error on
-    the fitted rows with the analytic Jacobian; with ``validation_fraction``,
+    ``n_transient`` holds it). Levenberg-Marquardt then minimises the
+    simulation error on the fitted rows with the analytic Jacobian; with
+    ``validation_fraction``,
     the iterate and the start with the lowest validation error are kept;
     with ``refit``, that iterate is then refined on all the rows.
     Diagonal rescalings of the states leave the output unchanged, so the
@@ -439,11 +439,11 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         return parameter_count(NetworkTerms.layout(self.n_states, n_inputs, n_outputs,
                                                    self.n_neurons))
 
-    def _n_drop(self, model, x0_held):
+    def _n_drop(self, problem):
         # Diagonal rescalings of the states compensated in the networks'
         # weights leave the output unchanged; the weight decay fixes the
         # scale, and so does a held initial state.
-        return 0 if self.weight_decay or x0_held else model.n_states
+        return 0 if self.weight_decay or problem.held.size else problem.model.n_states
 
     def _prepare_starts(self, context):
         problem, rows = context["problem"], context["rows"]

@@ -8,8 +8,8 @@ Every nonlinear estimator identifies ``x(t+1) = A x + B u + h_x(x, u)``,
    periodic data);
 2. the Best Linear Approximation on the rows before the held-out tails,
    exposed as ``bla_`` in the user's units;
-3. optionally, the linear part (and x0, unless held, and the output offset) refined on the
-   simulation error with the terms switched off;
+3. optionally, the linear part (and x0, unless held, and the output offset)
+   refined on the simulation error with the terms switched off;
 4. one or more starting points of the terms (the estimator's own
    initialisation), each refined by Levenberg-Marquardt on the shared
    :class:`~sknlss._core._problem.SimulationErrorProblem`; the start with the
@@ -148,11 +148,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         the estimation record: the fitted terms themselves by default."""
         return model.terms
 
-    def _n_drop(self, model, x0_held):
-        """Directions of the parameter space that leave the output unchanged
-        (discarded from the Levenberg-Marquardt step); ``x0_held``: whether
-        the search holds the initial state."""
-        return _similarity_directions(model, x0_held)
+    def _n_drop(self, problem):
+        """Directions of the parameter space that leave the output of
+        ``problem`` unchanged (discarded from the Levenberg-Marquardt step)."""
+        return _similarity_directions(problem)
 
     def _centred(self):
         """Whether the signals are centred (else only scaled)."""
@@ -214,7 +213,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         state's effect has then died out where the cost starts: a search would
         move it far away to fit the noise, and the model would run away over
         the transient."""
-        return self.estimate_x0 and 0 < self.n_transient and _settling_time(A) <= self.n_transient
+        return (self.estimate_x0 and self.n_transient > 0
+                and _settling_time(A) <= self.n_transient)
 
     def _problem(self, terms, rows, x0_held):
         """The simulation-error problem of a model with ``terms`` on ``rows``;
@@ -227,9 +227,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             held=model.columns("x0") if x0_held else None)
 
     def _fit_linear_part(self, problem, theta):
-        """``theta`` with its linear part (and x0, unless held, and the output offset) refined
-        on the simulation error, the terms left as they are, and the search's
-        result.
+        """``theta`` with its linear part (and x0, unless held, and the output
+        offset) refined on the simulation error, the terms left as they are,
+        and the search's result.
 
         A refinement that takes a stable linear part out of the unit circle is
         not taken (``theta`` is returned as it is, with the result of a search
@@ -238,8 +238,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         """
         model = problem.model
         free = np.setdiff1d(model.linear_columns, problem.held)
-        options = dict(self._lm_options(problem),
-                       n_drop=_similarity_directions(model, problem.held.size > 0))
+        options = dict(self._lm_options(problem), n_drop=_similarity_directions(problem))
         restricted = problem.restricted(theta, free)
         label = f"{self._label} (linear part)"
         refined = theta.copy()
@@ -255,8 +254,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 
     def _refined_linear_start(self, problem, theta):
         """The starting parameters with the linear part (and x0, unless held,
-        and the output offset) refined on the simulation error, the terms switched off (with
-        ``refine_linear``)."""
+        and the output offset) refined on the simulation error, the terms
+        switched off (with ``refine_linear``)."""
         if not self.refine_linear or self.max_iter == 0:
             return theta
         # A poor nonparametric BLA (short or noisy records) would otherwise
@@ -275,8 +274,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         """Record what the kept start's initialisation found (nothing by default)."""
 
     def _lm_options(self, problem):
-        return dict(max_iter=self.max_iter, tol=self.tol,
-                    n_drop=self._n_drop(problem.model, problem.held.size > 0),
+        return dict(max_iter=self.max_iter, tol=self.tol, n_drop=self._n_drop(problem),
                     n_iter_no_change=self.n_iter_no_change, verbose=self.verbose)
 
     def _validation_shares(self, starts):
@@ -633,12 +631,12 @@ def _settling_time(A):
     return 0
 
 
-def _similarity_directions(model, x0_held):
+def _similarity_directions(problem):
     """Directions in which a similarity transform of the states leaves the
-    output unchanged: ``n**2``, or the ``n**2 - n`` transforms that keep a
-    held initial state."""
-    n = model.n_states
-    return n * n - (n if x0_held else 0)
+    output of ``problem`` unchanged: ``n**2``, or the ``n**2 - n`` transforms
+    that keep the initial state when the problem holds it."""
+    n = problem.model.n_states
+    return n * n - (n if problem.held.size else 0)
 
 
 def n_cost_values(problem):

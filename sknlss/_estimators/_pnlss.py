@@ -80,8 +80,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         whose zero is a rest state is exactly representable.
     refine_linear : bool, default=False
         Before the nonlinear terms are freed, refine A, B, C, D (and x0,
-        unless held, and the output offset) on the same cost with E = F = 0, unless that
-        would make a stable linear part unstable. This recovers from a poor
+        unless held, and the output offset) on the same cost with E = F = 0,
+        unless that would make a stable linear part unstable. This recovers from a poor
         nonparametric BLA (short or noisy records); ``False`` starts the
         nonlinear optimisation from the BLA itself, as in the paper.
     period : int, default=None
@@ -154,13 +154,12 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         ``period``, the number of samples prepended for the steady state
         (every sample of a whole-period sequence then counts, in the cost
         and in the score).
-        With ``estimate_x0``, a transient at least as long as the settling
-        time of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
+        With ``estimate_x0``, a transient at least as long as the settling time
+        of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
         undetermined: the search then holds it at its starting value (see the
-        user guide). Without
-        ``estimate_x0`` and ``period``, the cost also skips the
-        settling time of the linear model's slowest pole (to 1 %, at most a
-        tenth of the shortest sequence): a record rarely starts at rest.
+        user guide). Without ``estimate_x0`` and ``period``, the cost also
+        skips the settling time of the linear model's slowest pole (to 1 %, at
+        most a tenth of the shortest sequence): a record rarely starts at rest.
     verbose : int, default=0
         Print the progress of the optimisation.
 
