@@ -411,7 +411,10 @@ class BLAEstimator(_BaseStateSpace):
         Samples at the start of each sequence left out: of the least-squares
         initial state and the score, and of the FRF (with ``period``, the first
         ``ceil(n_transient / period)`` periods of every sequence are dropped;
-        for the LPM, the first ``n_transient`` samples).
+        for the LPM, the first ``n_transient`` samples). The initial state's
+        least squares then shrink the directions whose free response has
+        settled below about 1 % by the first counted sample (see the user
+        guide's initial-state section).
     verbose : int, default=0
         Print the refinement's progress when positive.
 

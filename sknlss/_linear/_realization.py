@@ -39,6 +39,10 @@ _ROUND_ITER = 20
 # Relative singular value of the initial-state regression below which a
 # direction counts as undetermined (see `estimate_initial_state`).
 _STATE_RCOND = 1e-8
+# Weight of the penalty on the initial state's free response from the start of
+# its sequence when the cost rows skip that start (see `estimate_initial_state`):
+# the 1 % to which a mode has settled in the rule of the automatic transient.
+_SKIPPED_START_WEIGHT = 0.01
 
 
 def spectral_radius(A):
@@ -378,6 +382,14 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     not start in steady state, used as the output offset, contains the mean of
     the transient: without ``d`` the free response would be counted twice.
 
+    When ``mask`` skips the first samples of a sequence (a transient left out),
+    a fast mode may have decayed there below what the noise lets the cost rows
+    determine; the least squares then also penalise ``0.01 Phi_0 x0``, with
+    ``Phi_0`` the free response on as many rows from the start of each
+    sequence: a mode still at a tenth of its starting size or more keeps
+    99 % of its fit, one settled to 1 % (the settling time the estimators use)
+    half, and one settled further is left out.
+
     Parameters
     ----------
     A, B, C, D : ndarray
@@ -402,13 +414,14 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     zeros = np.zeros((n_seq, n))
     forced, _, diverged = simulate_linear(A, B, C, D, U, starts, zeros)
     no_input = np.zeros_like(U)
-    columns = []
+    free_responses = []
     for i in range(n):
         e = zeros.copy()
         e[:, i] = 1.0
         free, _, free_diverged = simulate_linear(A, B, C, D, no_input, starts, e)
         diverged |= free_diverged
-        columns.append(free[mask].ravel())
+        free_responses.append(free)
+    columns = [free[mask].ravel() for free in free_responses]
     if diverged:
         # No initial state fits a model that diverges on the record.
         return np.zeros(n), np.zeros(n_y)
@@ -416,9 +429,30 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     constant = np.tile(np.eye(n_y), (n_rows, 1))
     Phi = np.column_stack(columns + [constant])
     target = (Y - forced)[mask].ravel()
+    leading = _leading_rows(starts, mask)
+    if not np.array_equal(leading, mask):
+        # The cost rows skip the start of a sequence, where the free response
+        # of a fast mode has decayed: fitting the noise there would take a
+        # huge state. A penalty on the response from the start, with the
+        # weight _SKIPPED_START_WEIGHT, shrinks a direction that has decayed
+        # to a fraction f of it by f^2 / (f^2 + weight^2): one that has
+        # settled to the weight by half, one still at a tenth of it by 1 %.
+        reference = np.column_stack([free[leading].ravel() for free in free_responses])
+        penalty = np.hstack([_SKIPPED_START_WEIGHT * reference,
+                             np.zeros((reference.shape[0], n_y))])
+        Phi = np.vstack([Phi, penalty])
+        target = np.concatenate([target, np.zeros(reference.shape[0])])
     # A direction of the state whose free response on the cost rows is below
     # _STATE_RCOND of the largest (usually the offset's) is not determined by
-    # them (fast modes after a long n_transient): the minimum-norm solution
-    # leaves it out instead of fitting the noise with a huge state.
+    # them: the minimum-norm solution leaves it out instead of fitting the
+    # noise with a huge state.
     sol = np.linalg.lstsq(Phi, target, rcond=_STATE_RCOND)[0]
     return sol[:n], sol[n:]
+
+
+def _leading_rows(starts, mask):
+    """The first rows of every sequence, as many as ``mask`` holds in it."""
+    leading = np.zeros_like(mask)
+    for begin, end in zip(starts[:-1], starts[1:]):
+        leading[begin : begin + int(np.count_nonzero(mask[begin:end]))] = True
+    return leading
