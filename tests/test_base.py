@@ -15,6 +15,10 @@ def test_sequence_bounds():
     np.testing.assert_array_equal(sequence_bounds(None, 5), [0, 5])
     np.testing.assert_array_equal(sequence_bounds([3, 3, 1, 1, 1, 7], 6), [0, 2, 5, 6])
     np.testing.assert_array_equal(sequence_bounds(np.array([0.0, 0.0, 1.0]), 3), [0, 2, 3])
+    # Experiment names label sequences as integers do.
+    np.testing.assert_array_equal(sequence_bounds(["run_b", "run_b", "run_a"], 3), [0, 2, 3])
+    names = np.array(["x", "y", "y"], dtype=object)
+    np.testing.assert_array_equal(sequence_bounds(names, 3), [0, 1, 3])
 
 
 @pytest.mark.parametrize(
@@ -24,7 +28,7 @@ def test_sequence_bounds():
         (np.zeros((4, 1)), "one label per sample"),
         ([0, 0, 1, 0], "contiguous"),
         ([0.0, 0.5, 1.0, 1.0], "integer labels.*not whole numbers"),
-        (["a", "a", "b", "b"], "integer labels.*<U1 with labels that are not numbers"),
+        ([None, None, 1, 1], "integer labels.*or strings.*neither numbers nor strings"),
         ([0.0, np.nan, 1.0, 1.0], "integer labels"),
     ],
 )
@@ -106,7 +110,7 @@ def data():
 
 @pytest.mark.parametrize(
     "X_shape, match",
-    [((50,), "2D array"), ((50, 2, 1), "dim 3")],
+    [((50,), r"X must be 2-D.*u\.reshape\(-1, 1\)"), ((50, 2, 1), "dim 3")],
 )
 def test_x_must_be_2d(data, X_shape, match):
     X, y = data
@@ -119,8 +123,20 @@ def test_non_finite_rejected(data, bad):
     X, y = data
     X_bad = X.copy()
     X_bad[3, 1] = bad
-    with pytest.raises(ValueError, match="NaN|infinity"):
+    # The advice is that of records (no gaps), not scikit-learn's for
+    # independent samples (drop them, or impute).
+    gap = r"contains NaN or infinity in 1 row\(s\), the first at row 3.*sequence_id"
+    with pytest.raises(ValueError, match="X " + gap):
         _FirstOrder().fit(X_bad, y)
+    y_bad = y.copy()
+    y_bad[3] = bad
+    with pytest.raises(ValueError, match="y " + gap):
+        _FirstOrder().fit(X, y_bad)
+    model = _FirstOrder().fit(X, y)
+    with pytest.raises(ValueError, match="X " + gap):
+        model.predict(X_bad)
+    with pytest.raises(ValueError, match="y " + gap):
+        model.score(X, y_bad)
     y_bad = y.copy()
     y_bad[7] = bad
     with pytest.raises(ValueError, match="NaN|infinity"):

@@ -286,7 +286,7 @@ def test_bad_input():
     bad[5, 0] = np.inf
     with pytest.raises(ValueError, match="infinity"):
         bla.fit(bad, y, sequence_id=sid)
-    with pytest.raises(ValueError, match="2D array"):
+    with pytest.raises(ValueError, match=r"X must be 2-D"):
         bla.fit(X[:, 0], y, sequence_id=sid)
     with pytest.raises(ValueError, match="dim"):
         bla.fit(X[:, :, None], y, sequence_id=sid)

@@ -156,6 +156,21 @@ def test_steady_state_and_frequency_cost(name, periodic):
 
 
 @pytest.mark.parametrize("name", FACTORIES)
+def test_period_without_a_transient_warns(name, periodic):
+    # period alone prepends nothing: the fit starts every sequence from zero,
+    # as a toolbox user who sets the period would not expect.
+    X, y, sequence_id, period = periodic
+    with pytest.warns(UserWarning, match=rf"period={period} with n_transient=0 prepends "
+                                         rf"nothing.*n_transient={period}"):
+        FACTORIES[name](n_states=2, period=period, n_init=1).fit(X, y, sequence_id=sequence_id)
+    # With the initial state estimated, its transient is fitted on purpose.
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message=".*prepends nothing")
+        FACTORIES[name](n_states=2, period=period, n_init=1, estimate_x0=True).fit(
+            X, y, sequence_id=sequence_id)
+
+
+@pytest.mark.parametrize("name", FACTORIES)
 def test_a_given_initial_state_starts_a_periodic_model(name, periodic):
     X, y, sequence_id, period = periodic
     model = FACTORIES[name](n_states=2, period=period, n_transient=period,

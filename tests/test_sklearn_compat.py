@@ -206,6 +206,16 @@ def test_nested_parameters_and_clone():
     assert params["decoupledpnlss__rank"] == 4
     twin = clone(model)
     assert twin.get_params()["decoupledpnlss__n_states"] == 3
+    # A nested parameter of a sub-object left at None (its defaults) is refused
+    # by name, also when a search sets it; given the object, it is set.
+    with pytest.raises(ValueError, match="pnlss__degree sets a parameter of pnlss, which is "
+                                         "None"):
+        DecoupledPNLSS().set_params(pnlss__degree=2)
+    with pytest.raises(ValueError, match="bla__n_transient .* bla, which is None"):
+        GridSearchCV(PNLSSRegressor(), {"bla__n_transient": [0, 10]}).fit(
+            np.zeros((200, 1)), np.zeros(200))
+    tuned = DecoupledPNLSS().set_params(pnlss=PNLSSRegressor(), pnlss__degree=2)
+    assert tuned.pnlss.degree == 2
 
 
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")

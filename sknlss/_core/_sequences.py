@@ -14,8 +14,9 @@ def sequence_bounds(sequence_id, n_samples):
     Parameters
     ----------
     sequence_id : array-like of shape (n_samples,) or None
-        Integer label of the experiment each row belongs to. Each label must
-        occupy one contiguous block of rows. ``None`` means a single sequence.
+        Label of the experiment each row belongs to: an integer (also as a
+        whole float) or a string. Each label must occupy one contiguous block
+        of rows. ``None`` means a single sequence.
     n_samples : int
         Number of rows of ``X``.
 
@@ -32,15 +33,19 @@ def sequence_bounds(sequence_id, n_samples):
             f"sequence_id must be a 1-D array with one label per sample: got shape "
             f"{ids.shape} for X with {n_samples} samples."
         )
-    if ids.dtype.kind not in "iub":
+    if ids.dtype.kind == "O" and all(isinstance(label, str) for label in ids):
+        ids = ids.astype(str)
+    if ids.dtype.kind not in "iubUS":
+        # A float that is not a whole number is more likely a time vector
+        # passed by mistake than a label.
         if ids.dtype.kind == "f" and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)):
             ids = ids.astype(np.int64)
         else:
             found = ("values that are not whole numbers" if ids.dtype.kind == "f"
-                     else "labels that are not numbers")
+                     else "labels that are neither numbers nor strings")
             raise ValueError(
-                "sequence_id must hold integer labels (whole numbers, also as floats); "
-                f"got dtype {ids.dtype} with {found}."
+                "sequence_id must hold integer labels (whole numbers, also as floats) or "
+                f"strings; got dtype {ids.dtype} with {found}."
             )
     change = np.flatnonzero(ids[1:] != ids[:-1]) + 1
     starts = np.concatenate(([0], change, [n_samples])).astype(np.int64)

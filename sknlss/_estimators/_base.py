@@ -47,6 +47,45 @@ def normalisation_of(estimator):
 _CONSTANT = 1e-12
 
 
+def _record_input(estimator, X, *, reset, ensure_min_samples=1):
+    """``X`` validated as scikit-learn validates features, with the advice
+    for records: scikit-learn's own (reshape to one sample, drop the samples
+    with missing values) would change the experiment."""
+    with naming("X"):
+        try:
+            X = validate_data(estimator, X, reset=reset, dtype=np.float64,
+                              ensure_min_samples=ensure_min_samples, ensure_all_finite=False)
+        except ValueError as error:
+            if "got 1D array" not in str(error):
+                raise
+            raise ValueError(
+                "X must be 2-D, of shape (n_samples, n_inputs); got a 1-D array. Reshape "
+                "your data: a single input signal u is passed as u.reshape(-1, 1).") from None
+    _refuse_gaps(X, "X")
+    return X
+
+
+def _record_output(y):
+    """``y`` validated as scikit-learn validates targets, with the advice for
+    records (see :func:`_record_input`)."""
+    with naming("y"):
+        y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y",
+                        ensure_all_finite=False)
+    _refuse_gaps(y, "y")
+    return y
+
+
+def _refuse_gaps(values, argument):
+    """Refuse non-finite values: a record has no gaps."""
+    missing = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
+    if missing.any():
+        rows = np.flatnonzero(missing)
+        raise ValueError(
+            f"{argument} contains NaN or infinity in {rows.size} row(s), the first at row "
+            f"{rows[0]}. A record has no gaps: interpolate the missing samples, or split "
+            "the record at the gap into sequences (sequence_id).")
+
+
 def _offset_and_scale(values, argument, what):
     """Mean and standard deviation of every column of ``values``.
 
@@ -117,6 +156,31 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         "n_transient": [Integers(0, None, closed="left")],
     }
 
+    def set_params(self, **params):
+        """Set the parameters of this estimator (see scikit-learn's ``set_params``).
+
+        A nested parameter (``bla__n_transient``, ``pnlss__degree``,
+        ``basis__degree``) needs its parent to be an object: left at None, the
+        parent stands for the defaults and has no parameters to set.
+
+        Parameters
+        ----------
+        **params : dict
+            Estimator parameters.
+
+        Returns
+        -------
+        self : estimator instance
+        """
+        for key in params:
+            parent, nested, _ = key.partition("__")
+            if nested and params.get(parent, getattr(self, parent, "")) is None:
+                raise ValueError(
+                    f"{type(self).__name__}: {key} sets a parameter of {parent}, which is "
+                    f"None (its defaults). Pass an instance as {parent} (the parameter's "
+                    "docstring says which kind) to set or search its parameters.")
+        return super().set_params(**params)
+
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.target_tags.multi_output = True
@@ -133,15 +197,14 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """
         # X and y are checked one after the other, so that an error names the
         # argument at fault.
-        with naming("X"):
-            X = validate_data(self, X, dtype=np.float64, ensure_min_samples=2)
+        X = _record_input(self, X, reset=True, ensure_min_samples=2)
         if y is None:
             raise ValueError(
                 f"This {type(self).__name__} estimator requires y to be passed, but the "
                 "target y is None."
             )
+        y = _record_output(y)
         with naming("y"):
-            y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y")
             check_consistent_length(X, y)
         self._y_was_1d = y.ndim == 1
         Y = y.reshape(len(y), -1) if y.ndim == 1 else y
@@ -164,9 +227,10 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output signal.
         sequence_id : array-like of shape (n_samples,), default=None
-            Integer label of the experiment (record, realization) each row
-            belongs to; each label occupies one contiguous block of rows.
-            ``None`` means that all rows form one sequence.
+            Label (an integer or a string) of the experiment (record,
+            realization) each row belongs to; each label occupies one
+            contiguous block of rows. ``None`` means that all rows form one
+            sequence.
 
         Returns
         -------
@@ -259,8 +323,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             State x(t) at each sample, returned when ``return_states`` is True.
         """
         check_is_fitted(self)
-        with naming("X"):
-            X = validate_data(self, X, reset=False, dtype=np.float64)
+        X = _record_input(self, X, reset=False)
         starts = sequence_bounds(sequence_id, X.shape[0])
         # A state the user passes starts the simulation, periodic data or not.
         steady_state = x0 is None
@@ -344,10 +407,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         >>> y_sim = model.predict(data.X_test, x0=x0)
         """
         check_is_fitted(self)
-        with naming("X"):
-            X = validate_data(self, X, reset=False, dtype=np.float64)
-        with naming("y"):
-            y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y")
+        X = _record_input(self, X, reset=False)
+        y = _record_output(y)
         Y = y.reshape(len(y), -1)
         if Y.shape != (X.shape[0], self.C_.shape[0]):
             raise ValueError(
@@ -387,8 +448,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Coefficient of determination averaged uniformly over the outputs.
         """
         y_pred = self.predict(X, sequence_id=sequence_id)
-        with naming("y"):
-            y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y")
+        y = _record_output(y)
         if y.shape[0] != y_pred.shape[0]:
             raise ValueError(
                 f"X and y have different numbers of samples: {y_pred.shape[0]} and "

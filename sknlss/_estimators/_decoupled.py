@@ -118,7 +118,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         the nearer end of that range, so that where the data did not go the
         branch grows no faster than linearly, or as the basis combination
         itself (a polynomial keeps its curvature). The fit is the same either
-        way; only predictions beyond that range differ.
+        way; only predictions beyond that range differ. ``fit`` fixes the
+        continuation of the fitted model: a change after the fit takes effect
+        at the next one.
     estimate_x0 : bool, default=False
         Estimate the initial state (shared by all sequences, forwarded to the
         PNLSS model) and a constant output offset with it
@@ -401,8 +403,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output signal.
         sequence_id : array-like of shape (n_samples,), default=None
-            Integer label of the experiment each row belongs to; each label
-            occupies one contiguous block of rows.
+            Label (an integer or a string) of the experiment each row belongs
+            to; each label occupies one contiguous block of rows.
 
         Returns
         -------

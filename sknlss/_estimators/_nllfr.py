@@ -302,7 +302,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         with it the continuation: a hardening law (a cubic spring) picks the
         powers, a saturating one the bounded basis (see the user guide). The
         fit is the same whatever the option; only predictions beyond that
-        range differ (``extrapolation_``).
+        range differ (``extrapolation_``). ``fit`` fixes the continuation of
+        the fitted model: a change after the fit takes effect at the next one.
     init : {"trajectory", "inference"}, default="trajectory"
         How each start sets the branches. ``"trajectory"``: the branch inputs
         are fixed along the BLA's trajectory, and the branch outputs and

@@ -73,6 +73,10 @@ _GUARD_RANGE = 10.0
 #: fresh simulated records came from starts within 1.5 times the best.
 _ESCAPE_GAIN = 2.0
 _ESCAPE_TOLERANCE = 2.0
+#: With ``center=False``, a signal whose mean exceeds this many standard
+#: deviations warns: its zero, around which the model is expanded, then lies
+#: outside the bulk of its samples.
+_OFFSET_LIMIT = 1.0
 #: Copies of the Jacobian a Levenberg-Marquardt step holds at its peak: the
 #: one the kernel fills, the same stacked with the penalty rows, and the
 #: optimiser's column-scaled working copy that its QR factorisation overwrites.
@@ -161,6 +165,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     def _validate_training_data(self, X, y, sequence_id):
         U, Y, starts = super()._validate_training_data(X, y, sequence_id)
         if not self._centred():
+            self._warn_if_offset()
             # Scale only: the model is expanded around the signals' own zero,
             # not around their means.
             U = np.ascontiguousarray(U + self.u_offset_ / self.u_scale_)
@@ -168,6 +173,24 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             self.u_offset_ = np.zeros_like(self.u_offset_)
             self.y_offset_ = np.zeros_like(self.y_offset_)
         return U, Y, starts
+
+    def _warn_if_offset(self):
+        """Warn when a signal's mean exceeds its standard deviation: uncentred,
+        the model has to produce that offset through its dynamics (the
+        toolbox's convention expects signals around zero)."""
+        relative = np.concatenate([self.u_offset_ / self.u_scale_,
+                                   self.y_offset_ / self.y_scale_])
+        worst = int(np.argmax(np.abs(relative)))
+        if abs(relative[worst]) <= _OFFSET_LIMIT:
+            return
+        n_u = len(self.u_offset_)
+        which = (f"input column {worst}" if worst < n_u else f"output {worst - n_u}")
+        warn_at_caller(
+            f"{type(self).__name__}(center=False): the mean of {which} is "
+            f"{abs(relative[worst]):.3g} times its standard deviation. Uncentred, the "
+            "model is expanded around the signals' zero and has to produce that offset "
+            "through its dynamics; remove the offsets first, or use center=True.",
+            UserWarning)
 
     def _check_periodic(self, starts):
         if self.cost == "frequency" and self.period is None:
@@ -179,6 +202,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     f"With period={self.period}, every sequence must hold a whole number "
                     f"of periods; got sequence lengths {lengths.tolist()}."
                 )
+            if self.n_transient == 0 and not self.estimate_x0:
+                warn_at_caller(
+                    f"{type(self).__name__}: period={self.period} with n_transient=0 "
+                    "prepends nothing: every sequence is simulated from the zero state, "
+                    "not in its periodic steady state, and the transient of that start "
+                    f"is fitted. Set n_transient (n_transient={self.period} prepends the "
+                    "last period of every sequence), or estimate_x0=True.", UserWarning)
             if self.validation_fraction != "auto":
                 held_out = np.round(float(self.validation_fraction) * lengths).astype(int)
                 if np.any(held_out % self.period):
@@ -440,13 +470,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             nrmse(Y[rows], Y_model[rows], multioutput="raw_values")))
         if error <= _MEAN_LEVEL:
             return
-        remedy = ("center=True: with center=False the model has to produce the signals' "
-                  "offsets through its dynamics" if not self._centred() else
-                  "a look at bla_, the linear model it starts from")
+        advice = ("Try center=True: with center=False the model has to produce the "
+                  "signals' offsets through its dynamics." if not self._centred() else
+                  "Check bla_, the linear model it starts from (compare its frf_ with its "
+                  "frf_model_): an input that excites few frequencies, or little linear "
+                  "relation from X to y, gives a poor start.")
         warn_at_caller(
             f"{type(self).__name__}({self._structure()}) simulates its estimation record "
             f"worse than the output's mean (normalised RMS error {error:.3g}; "
-            f"fell_back_to_linear_={self.fell_back_to_linear_}). Try {remedy}.",
+            f"fell_back_to_linear_={self.fell_back_to_linear_}). {advice}",
             UserWarning)
 
     def _search(self, problem_sets, shares, theta, U, Y, starts):

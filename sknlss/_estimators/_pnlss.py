@@ -63,7 +63,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         grow no faster than linearly (for saturation, friction, or a state,
         such as a position, that leaves its range without the law changing).
         The fit is the same whichever is chosen; only predictions beyond the
-        box differ.
+        box differ. ``fit`` fixes the continuation of the fitted model: a
+        change after the fit takes effect at the next one.
     estimate_x0 : bool, default=False
         Estimate the initial state, shared by all sequences (PNLSS-I), and
         a constant output offset with it (``output_offset_``); ``predict``
