@@ -202,13 +202,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     f"With period={self.period}, every sequence must hold a whole number "
                     f"of periods; got sequence lengths {lengths.tolist()}."
                 )
-            if self.n_transient == 0 and not self.estimate_x0:
+            # One estimated initial state can absorb the start of one sequence,
+            # not those of several realizations, each in its own steady state.
+            if self.n_transient == 0 and (not self.estimate_x0 or len(lengths) > 1):
                 warn_at_caller(
                     f"{type(self).__name__}: period={self.period} with n_transient=0 "
-                    "prepends nothing: every sequence is simulated from the zero state, "
-                    "not in its periodic steady state, and the transient of that start "
-                    f"is fitted. Set n_transient (n_transient={self.period} prepends the "
-                    "last period of every sequence), or estimate_x0=True.", UserWarning)
+                    "prepends nothing: every sequence is simulated from the initial "
+                    "state, not in its periodic steady state, and the transient of that "
+                    f"start is fitted. Set n_transient (n_transient={self.period} "
+                    "prepends the last period of every sequence).", UserWarning)
             if self.validation_fraction != "auto":
                 held_out = np.round(float(self.validation_fraction) * lengths).astype(int)
                 if np.any(held_out % self.period):

@@ -385,10 +385,10 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     When ``mask`` skips the first samples of a sequence (a transient left out),
     a fast mode may have decayed there below what the noise lets the cost rows
     determine; the least squares then also penalise ``0.01 Phi_0 x0``, with
-    ``Phi_0`` the free response on as many rows from the start of each
-    sequence: a mode still at a tenth of its starting size or more keeps
+    ``Phi_0`` the free response on the first rows of each sequence, as many as
+    its cost rows: a mode still at a tenth of its starting size or more keeps
     99 % of its fit, one settled to 1 % (the settling time the estimators use)
-    half, and one settled further is left out.
+    half, and one settled further is shrunk towards zero.
 
     Parameters
     ----------
