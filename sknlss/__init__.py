@@ -32,13 +32,14 @@ from ._estimators._nlss2 import NLSS2Regressor
 from ._estimators._pnlss import PNLSSRegressor
 from ._terms._bases import ChebyshevBasis, LegendreBasis, PolynomialBasis
 from ._terms._cpd import decouple_polynomial
-from .exceptions import LinearFallbackWarning, SimulationDivergedWarning
+from .exceptions import DataWarning, LinearFallbackWarning, SimulationDivergedWarning
 
 __version__ = "0.1.0"
 
 __all__ = [
     "BLAEstimator",
     "ChebyshevBasis",
+    "DataWarning",
     "DecoupledPNLSS",
     "LegendreBasis",
     "LinearFallbackWarning",

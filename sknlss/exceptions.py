@@ -9,7 +9,7 @@ import sys
 import warnings
 from pathlib import Path
 
-__all__ = ["LinearFallbackWarning", "SimulationDivergedWarning"]
+__all__ = ["DataWarning", "LinearFallbackWarning", "SimulationDivergedWarning"]
 
 _PACKAGE = str(Path(__file__).resolve().parent)
 
@@ -19,6 +19,16 @@ class SimulationDivergedWarning(RuntimeWarning):
 
     The outputs from the first divergent sample to the end of that sequence are
     set to NaN.
+    """
+
+
+class DataWarning(UserWarning):
+    """Warning raised when the training data do not suit the settings.
+
+    A signal whose mean exceeds its standard deviation with ``center=False``;
+    ``period`` without ``n_transient``, which prepends nothing for the steady
+    state; an input that does not repeat with ``period``. The fit goes on as
+    the settings say.
     """
 
 

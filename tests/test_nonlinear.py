@@ -13,6 +13,7 @@ from sklearn.utils._param_validation import InvalidParameterError
 
 from sknlss import (
     BLAEstimator,
+    DataWarning,
     DecoupledPNLSS,
     LinearFallbackWarning,
     NLLFRRegressor,
@@ -151,8 +152,29 @@ def test_steady_state_and_frequency_cost(name, periodic):
     both = model.predict(np.vstack([X[:period], X[:period + 5]]), sequence_id=mixed)
     np.testing.assert_array_equal(both[:period], one)
     np.testing.assert_array_equal(both[period:], model.predict(X[:period + 5]))
-    rows = model._scored_rows(np.array([0, period, 2 * period + 5]))
+    rows = model._scored_rows(np.array([0, period, 2 * period + 5]),
+                              np.vstack([X[:period], X[:period + 5]]))
     assert rows[:period].all() and not rows[period:2 * period].any() and rows[2 * period:].all()
+    # A record whose length is whole periods but whose input does not repeat
+    # starts from the initial state, as a record of any other length does.
+    shuffled = np.random.default_rng(0).permutation(X[:2 * period])
+    np.testing.assert_array_equal(model.predict(shuffled),
+                                  model.predict(shuffled, x0=model.x0_))
+    assert not model._scored_rows(np.array([0, 2 * period]), shuffled)[:period].all()
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_period_of_an_input_that_does_not_repeat_warns(name, periodic):
+    X, y, sequence_id, period = periodic
+    # The second realization's periods change in amplitude.
+    second = sequence_id == 1
+    varying, y_varying = X.copy(), y.copy()
+    varying[second] *= np.repeat([1.0, 1.6, 0.5], period)[:, None]
+    y_varying[second] = _duffing(varying[second])
+    with pytest.warns(DataWarning, match=rf"the input of sequence\(s\) \[1\] .* does not "
+                                         rf"repeat with period={period}"):
+        FACTORIES[name](n_states=2, period=period, n_transient=period, n_init=1).fit(
+            varying, y_varying, sequence_id=sequence_id)
 
 
 @pytest.mark.parametrize("name", FACTORIES)
@@ -160,12 +182,12 @@ def test_period_without_a_transient_warns(name, periodic):
     # period alone prepends nothing: the fit starts every sequence from zero,
     # as a toolbox user who sets the period would not expect.
     X, y, sequence_id, period = periodic
-    with pytest.warns(UserWarning, match=rf"period={period} with n_transient=0 prepends "
+    with pytest.warns(DataWarning, match=rf"period={period} with n_transient=0 prepends "
                                          rf"nothing.*n_transient={period}"):
         FACTORIES[name](n_states=2, period=period, n_init=1).fit(X, y, sequence_id=sequence_id)
     # One estimated initial state starts one sequence as it should, not the
     # realizations of several, each in its own steady state.
-    with pytest.warns(UserWarning, match="prepends nothing"):
+    with pytest.warns(DataWarning, match="prepends nothing"):
         FACTORIES[name](n_states=2, period=period, n_init=1, estimate_x0=True).fit(
             X, y, sequence_id=sequence_id)
     first = sequence_id == 0

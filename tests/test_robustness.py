@@ -950,7 +950,8 @@ def test_public_names_are_covered():
     # A new public estimator or function needs its hostile inputs here.
     covered = {"BLAEstimator", "PNLSSRegressor", "NLSS2Regressor", "DecoupledPNLSS",
                "NLLFRRegressor", "decouple_polynomial", "PolynomialBasis", "LegendreBasis",
-               "ChebyshevBasis", "LinearFallbackWarning", "SimulationDivergedWarning"}
+               "ChebyshevBasis", "DataWarning", "LinearFallbackWarning",
+               "SimulationDivergedWarning"}
     assert set(sknlss.__all__) <= covered
     assert set(metrics.__all__) == {"rms_error", "nrmse", "fit_percent",
                                     "make_transient_scorer"}

@@ -163,3 +163,25 @@ def period_blocks(mask, starts, period):
             )
         blocks.append((begin + rows[0], rows.size // period))
     return blocks
+
+
+def periodic_sequences(U, starts, period, tolerance):
+    """Which sequences of ``U`` repeat with ``period``.
+
+    A sequence repeats when it is a whole number of periods and its periods
+    differ from their mean by an RMS value within ``tolerance`` times its own
+    standard deviation. A single period counts as repeating: nothing tells it
+    apart from one that does.
+
+    Returns
+    -------
+    repeats : ndarray of bool of shape (n_sequences,)
+    """
+    repeats = np.zeros(len(starts) - 1, dtype=bool)
+    for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
+        if (end - begin) % period:
+            continue
+        periods = U[begin:end].reshape(-1, period, U.shape[1])
+        spread = np.sqrt(np.mean((periods - periods.mean(axis=0)) ** 2))
+        repeats[k] = spread <= tolerance * np.std(U[begin:end])
+    return repeats

@@ -255,17 +255,18 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """The fitted model: a :class:`~sknlss._core._model.StateSpaceModel`
         and its parameter vector."""
 
-    def _scored_rows(self, starts):
-        """The rows ``score`` compares: all but the first ``n_transient`` of
-        every sequence."""
+    def _scored_rows(self, starts, X):
+        """The rows ``score`` compares for the input ``X``: all but the first
+        ``n_transient`` of every sequence."""
         return transient_mask(starts, self.n_transient)
 
     def _simulate_normalized(self, U, starts, x0, steady_state=False):
         """Simulate from initial states ``x0`` of shape (n_sequences, n_states).
 
         ``steady_state`` lets a model fitted on periodic data start each
-        whole-period sequence in its periodic steady state instead (the
-        initial states then only start the prepended samples).
+        sequence whose input repeats with the period in its periodic steady
+        state instead (the initial states then only start the prepended
+        samples).
 
         Returns the normalised outputs (n_samples, n_outputs), the states
         (n_samples, n_states) and a flag telling whether a trajectory diverged.
@@ -311,7 +312,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             order of the rows of ``X`` (not in the sorted order of the labels).
             ``None`` uses the fitted ``x0_`` (zero unless it was estimated);
             a nonlinear model fitted with ``period`` and ``n_transient`` then
-            starts every whole-period sequence in its periodic steady state.
+            starts every sequence whose input repeats with the period in its
+            periodic steady state.
         return_states : bool, default=False
             Also return the simulated states.
 
@@ -448,6 +450,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Coefficient of determination averaged uniformly over the outputs.
         """
         y_pred = self.predict(X, sequence_id=sequence_id)
+        X = _record_input(self, X, reset=False)
         y = _record_output(y)
         if y.shape[0] != y_pred.shape[0]:
             raise ValueError(
@@ -459,7 +462,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             raise ValueError(
                 f"y has {y.shape[1]} output(s), the model was fitted on {y_pred.shape[1]}."
             )
-        keep = self._scored_rows(sequence_bounds(sequence_id, len(y_pred)))
+        keep = self._scored_rows(sequence_bounds(sequence_id, len(y_pred)), X)
         if not keep.any():
             raise ValueError(
                 f"n_transient={self.n_transient} leaves no sample to score."

@@ -19,7 +19,7 @@ from .._terms._bases import PolynomialBasis
 from .._terms._branches import BranchTerms
 from .._terms._cpd import decouple_polynomial
 from .._validation import Integers
-from ..exceptions import warn_at_caller
+from ..exceptions import DataWarning, warn_at_caller
 from ._base import _unfitted_on_error
 from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
 from ._pnlss import PNLSSRegressor
@@ -141,7 +141,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         sequence must be a whole number of periods; each sequence is then
         simulated in steady state by prepending its last ``n_transient``
         samples (excluded from the cost), in ``fit`` and in ``predict`` (for
-        sequences whose length is a multiple of ``period``, unless ``x0`` is
+        sequences whose input repeats with ``period``, unless ``x0`` is
         passed).
     cost : {"time", "frequency"}, default="time"
         Time-domain simulation error, or its per-period DFT weighted by the
@@ -198,8 +198,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state
-        (every sample of a whole-period sequence then counts, in the cost
-        and in the score).
+        (every sample of a sequence simulated in steady state then counts, in
+        the cost and in the score).
         With ``estimate_x0``, a transient at least as long as the settling time
         of the slowest mode of the PNLSS model's ``A_`` (to 1 %; never when
         that mode does not decay) leaves the initial state undetermined: the
@@ -424,9 +424,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         for warning in caught:
             # The PNLSS model is the starting point of the decoupling, which is
             # optimised again: whether its own iterations had settled is not
-            # the result (the final optimisation warns for itself). What else
+            # the result (the final optimisation warns for itself), and its
+            # data are this estimator's, which checks them itself. What else
             # it says concerns this estimator's user, in its name.
-            if not issubclass(warning.category, ConvergenceWarning):
+            if not issubclass(warning.category, (ConvergenceWarning, DataWarning)):
                 warn_at_caller(f"{type(self).__name__}: the PNLSS model it starts from: "
                                f"{warning.message}", warning.category)
         return self._fit(X, y, sequence_id)

@@ -167,7 +167,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         sequence must be a whole number of periods; each sequence is then
         simulated in steady state by prepending its last ``n_transient``
         samples (excluded from the cost), in ``fit`` and in ``predict`` (for
-        sequences whose length is a multiple of ``period``, unless ``x0`` is
+        sequences whose input repeats with ``period``, unless ``x0`` is
         passed).
     cost : {"time", "frequency"}, default="time"
         Time-domain simulation error, or its per-period DFT weighted by the
@@ -233,8 +233,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state
-        (every sample of a whole-period sequence then counts, in the cost
-        and in the score).
+        (every sample of a sequence simulated in steady state then counts, in
+        the cost and in the score).
         With ``estimate_x0``, a transient at least as long as the settling time
         of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
         undetermined: the search then holds it at its starting value (see the

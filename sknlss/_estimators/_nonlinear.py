@@ -38,11 +38,11 @@ from .._core._memory import check_memory
 from .._core._model import StateSpaceModel, parameter_count
 from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
-from .._core._sequences import (holdout_masks, part_before_holdout, steady_state_rows,
-                                transient_mask)
+from .._core._sequences import (holdout_masks, part_before_holdout, periodic_sequences,
+                                steady_state_rows, transient_mask)
 from .._linear._realization import spectral_radius
 from .._validation import ANY_INTEGER, Integers
-from ..exceptions import LinearFallbackWarning, warn_at_caller
+from ..exceptions import DataWarning, LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
 from ._bla import _MEAN_LEVEL, BLAEstimator, check_excitation, fit_linear_model, fitted_bla
@@ -73,6 +73,11 @@ _GUARD_RANGE = 10.0
 #: fresh simulated records came from starts within 1.5 times the best.
 _ESCAPE_GAIN = 2.0
 _ESCAPE_TOLERANCE = 2.0
+#: With ``period``, a sequence is simulated in steady state only when its
+#: periods differ from their mean by at most this fraction of its standard
+#: deviation: a random input differs by 70 % or more (two periods or more), a
+#: measured periodic one by its noise.
+_PERIODIC_TOLERANCE = 0.2
 #: With ``center=False``, a signal whose mean exceeds this many standard
 #: deviations warns: its zero, around which the model is expanded, then lies
 #: outside the bulk of its samples.
@@ -190,9 +195,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             f"{abs(relative[worst]):.3g} times its standard deviation. Uncentred, the "
             "model is expanded around the signals' zero and has to produce that offset "
             "through its dynamics; remove the offsets first, or use center=True.",
-            UserWarning)
+            DataWarning)
 
-    def _check_periodic(self, starts):
+    def _check_periodic(self, U, starts):
         if self.cost == "frequency" and self.period is None:
             raise ValueError("cost='frequency' needs the period of the excitation.")
         if self.period is not None:
@@ -202,6 +207,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     f"With period={self.period}, every sequence must hold a whole number "
                     f"of periods; got sequence lengths {lengths.tolist()}."
                 )
+            repeating = periodic_sequences(U, starts, self.period, _PERIODIC_TOLERANCE)
+            if not repeating.all():
+                warn_at_caller(
+                    f"{type(self).__name__}: the input of sequence(s) "
+                    f"{np.flatnonzero(~repeating).tolist()} (in the order of the rows) does "
+                    f"not repeat with period={self.period}: its periods differ by more than "
+                    f"{_PERIODIC_TOLERANCE:.0%} of its standard deviation. The fit treats "
+                    "every sequence as periodic; predict simulates such a sequence from "
+                    "its initial state.", DataWarning)
             # One estimated initial state can absorb the start of one sequence,
             # not those of several realizations, each in its own steady state.
             if self.n_transient == 0 and (not self.estimate_x0 or len(lengths) > 1):
@@ -210,7 +224,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     "prepends nothing: every sequence is simulated from the initial "
                     "state, not in its periodic steady state, and the transient of that "
                     f"start is fitted. Set n_transient (n_transient={self.period} "
-                    "prepends the last period of every sequence).", UserWarning)
+                    "prepends the last period of every sequence).", DataWarning)
             if self.validation_fraction != "auto":
                 held_out = np.round(float(self.validation_fraction) * lengths).astype(int)
                 if np.any(held_out % self.period):
@@ -410,7 +424,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                 "samples. Lower n_transient or use a longer record.") from None
 
     def _fit_normalized(self, U, Y, starts):
-        self._check_periodic(starts)
+        self._check_periodic(U, starts)
         shares = self._validation_shares(starts)
         self._check_transient(starts, shares)
         self._check_model_size(U, Y, starts, shares)
@@ -594,26 +608,27 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         values.update(self._terms_values())
         return self._model, self._model.pack(values)
 
-    def _steady_sequences(self, starts):
-        """Which sequences are simulated in their periodic steady state, as in
-        the fit: the whole-period ones, for a model fitted with ``period`` and
-        ``n_transient``."""
-        lengths = np.diff(starts)
+    def _steady_sequences(self, starts, U):
+        """Which sequences of the input ``U`` are simulated in their periodic
+        steady state, as in the fit: for a model fitted with ``period`` and
+        ``n_transient``, those whose input repeats with the period (a record
+        whose length merely is a multiple of it starts from its initial
+        state)."""
         if self.period is None or self.n_transient == 0:
-            return np.zeros(lengths.size, dtype=bool)
-        return lengths % self.period == 0
+            return np.zeros(len(starts) - 1, dtype=bool)
+        return periodic_sequences(U, starts, self.period, _PERIODIC_TOLERANCE)
 
-    def _scored_rows(self, starts):
+    def _scored_rows(self, starts, X):
         # As in the cost, every sample of a steady-state sequence counts.
-        return transient_mask(starts, np.where(self._steady_sequences(starts), 0,
+        return transient_mask(starts, np.where(self._steady_sequences(starts, X), 0,
                                                self.n_transient))
 
     def _simulate_normalized(self, U, starts, x0, steady_state=False):
-        steady = self._steady_sequences(starts) & steady_state
+        steady = self._steady_sequences(starts, U) & steady_state
         if not steady.any():
             return super()._simulate_normalized(U, starts, x0)
-        # Periodic data: every whole-period sequence starts in steady state, as
-        # in the fit; the others from their initial state.
+        # Periodic data: every sequence whose input repeats starts in steady
+        # state, as in the fit; the others from their initial state.
         index, sim_starts, original = steady_state_rows(
             starts, np.where(steady, self.n_transient, 0))
         Y, X, diverged = super()._simulate_normalized(np.ascontiguousarray(U[index]),
