@@ -119,13 +119,17 @@ def test_held_initial_state_of_a_bla_with_its_own_transient(record):
     y_moving = _duffing(u, x0=(2.0, 1.5)) + 3.0
     bla = BLAEstimator(n_transient=50, estimate_x0=True).fit(u, y_moving)
     assert np.max(np.abs(bla.x0_)) < 10.0
-    model = PNLSSRegressor(n_states=2, degree=(2, 3), estimate_x0=True, n_transient=50,
-                           max_iter=30, random_state=0, bla=BLAEstimator(n_transient=50))
-    model.fit(u, y_moving)
-    assert not model.fell_back_to_linear_
-    # Measured: 0.011 of the BLA's error after the transient.
-    assert (rms_error(y_moving[50:], model.predict(u)[50:])
-            < 0.1 * rms_error(y_moving[50:], model.bla_.predict(u)[50:]))
+    ratios = []
+    for seed in range(3):
+        model = PNLSSRegressor(n_states=2, degree=(2, 3), estimate_x0=True, n_transient=50,
+                               max_iter=30, random_state=seed,
+                               bla=BLAEstimator(n_transient=50)).fit(u, y_moving)
+        assert not model.fell_back_to_linear_
+        ratios.append(rms_error(y_moving[50:], model.predict(u)[50:])
+                      / rms_error(y_moving[50:], model.bla_.predict(u)[50:]))
+    # Measured over random states 0-5 (one and two BLAS threads alike): 0.0105
+    # to 0.0117 of the BLA's error after the transient.
+    assert np.median(ratios) < 0.1
 
 
 def _terms_count(model):

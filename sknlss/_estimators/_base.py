@@ -56,6 +56,8 @@ def _record_input(estimator, X, *, reset, ensure_min_samples=1):
             X = validate_data(estimator, X, reset=reset, dtype=np.float64,
                               ensure_min_samples=ensure_min_samples, ensure_all_finite=False)
         except ValueError as error:
+            # scikit-learn's message for a 1-D array, whose advice to reshape
+            # it into one sample would turn a record into a single sample.
             if "got 1D array" not in str(error):
                 raise
             raise ValueError(

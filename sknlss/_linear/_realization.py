@@ -431,12 +431,9 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     target = (Y - forced)[mask].ravel()
     leading = _leading_rows(starts, mask)
     if not np.array_equal(leading, mask):
-        # The cost rows skip the start of a sequence, where the free response
-        # of a fast mode has decayed: fitting the noise there would take a
-        # huge state. A penalty on the response from the start, with the
-        # weight _SKIPPED_START_WEIGHT, shrinks a direction that has decayed
-        # to a fraction f of it by f^2 / (f^2 + weight^2): one that has
-        # settled to the weight by half, one still at a tenth of it by 1 %.
+        # The cost rows skip the start of a sequence (see the docstring): a
+        # direction that has decayed to a fraction f of its response from the
+        # start keeps f^2 / (f^2 + weight^2) of its fit.
         reference = np.column_stack([free[leading].ravel() for free in free_responses])
         penalty = np.hstack([_SKIPPED_START_WEIGHT * reference,
                              np.zeros((reference.shape[0], n_y))])
