@@ -2,11 +2,14 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sklearn.metrics import r2_score
 
 from sknlss import SimulationDivergedWarning
 from sknlss._core._model import StateSpaceModel
-from sknlss._core._sequences import holdout_masks, sequence_bounds, transient_mask
+from sknlss._core._sequences import (delayed_input, holdout_masks, sequence_bounds,
+                                     transient_mask)
 from sknlss._estimators._base import _BaseStateSpace
 
 
@@ -64,15 +67,41 @@ def test_holdout_masks():
         holdout_masks(starts, 10, 0.0)
 
 
+@settings(max_examples=50, deadline=None)
+@given(lengths=st.lists(st.integers(6, 14), min_size=1, max_size=4),
+       delays=st.lists(st.integers(0, 5), min_size=1, max_size=3),
+       period=st.integers(1, 4), seed=st.integers(0, 2**16))
+def test_delayed_input(lengths, delays, period, seed):
+    rng = np.random.default_rng(seed)
+    starts = np.concatenate([[0], np.cumsum(lengths)])
+    U = rng.standard_normal((starts[-1], len(delays)))
+    # Only a sequence of whole periods can repeat (the callers' rule).
+    repeating = (rng.random(len(lengths)) < 0.5) & (np.array(lengths) % period == 0)
+    delayed = delayed_input(U, starts, np.array(delays), period, repeating)
+    for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
+        for j, lag in enumerate(delays):
+            for t in range(begin, end):
+                if t - lag >= begin:
+                    expected = U[t - lag, j]
+                elif repeating[k]:
+                    # The periodic continuation of the sequence before its start.
+                    expected = U[begin + (t - lag - begin) % period, j]
+                else:
+                    expected = 0.0
+                assert delayed[t, j] == expected
+    assert delayed_input(U, starts, np.zeros(len(delays), int)) is U
+
+
 # ------------------------------------------------------- the base contract
 class _FirstOrder(_BaseStateSpace):
     """x(t+1) = pole x(t) + sum(u(t)); y_j(t) = x(t) + gain_j sum(u(t)), normalised units."""
 
     _parameter_constraints = {**_BaseStateSpace._parameter_constraints}
 
-    def __init__(self, pole=0.5, *, feedthrough=0.25, n_transient=0):
+    def __init__(self, pole=0.5, *, feedthrough=0.25, input_delay=0, n_transient=0):
         self.pole = pole
         self.feedthrough = feedthrough
+        self.input_delay = input_delay
         self.n_transient = n_transient
 
     def _fit_normalized(self, U, Y, starts):
@@ -279,6 +308,46 @@ def test_score_weights_the_samples(data):
     assert model.score(X, y_true, np.ones(50)) == pytest.approx(model.score(X, y_true))
     with pytest.raises(ValueError, match="sample_weight"):
         model.score(X, y_true, np.ones(49))
+
+
+def test_input_delay_shifts_the_input_in_every_sequence(data):
+    X, y = data
+    model = _FirstOrder(input_delay=[2, 0]).fit(X, y)
+    np.testing.assert_array_equal(model.input_delay_, [2, 0])
+    U = (X - X.mean(axis=0)) / X.std(axis=0)
+    ids = np.repeat([0, 1], 25)
+    U_delayed = U.copy()
+    for begin in (0, 25):
+        U_delayed[begin + 2:begin + 25, 0] = U[begin:begin + 23, 0]
+        # Before the start the input was not measured: its mean.
+        U_delayed[begin:begin + 2, 0] = 0.0
+    predicted = model.predict(X, sequence_id=ids)
+    for begin in (0, 25):
+        np.testing.assert_allclose(
+            predicted[begin:begin + 25],
+            y.mean() + y.std() * _reference(model, U_delayed[begin:begin + 25])[:, 0])
+    # The delay is that of the fit: set_params on the fitted model changes nothing.
+    np.testing.assert_array_equal(model.set_params(input_delay=0).predict(X, sequence_id=ids),
+                                  predicted)
+
+
+@pytest.mark.parametrize("input_delay, match", [
+    (-1, "input_delay"), ([1, 2, 3], r"one per input column \(2\)"), (1.5, "input_delay"),
+    ([1.5, 0], "non-negative integer"), (25, "not shorter than a sequence of 25"),
+])
+def test_input_delay_validated(data, input_delay, match):
+    X, y = data
+    with pytest.raises(ValueError, match=match):
+        _FirstOrder(input_delay=input_delay).fit(X, y, sequence_id=np.repeat([0, 1], 25))
+
+
+def test_input_delay_longer_than_a_predicted_record(data):
+    X, y = data
+    model = _FirstOrder(input_delay=3).fit(X, y)
+    with pytest.raises(ValueError, match="not shorter than a sequence of 3"):
+        model.predict(X[:3])
+    with pytest.raises(ValueError, match="not shorter than a sequence of 2"):
+        model.estimate_initial_state(X[:2], y[:2])
 
 
 def test_n_transient_validated(data):

@@ -245,6 +245,22 @@ def test_bla_predicts_and_reports_in_user_units(name, record):
 
 
 @pytest.mark.parametrize("name", FACTORIES)
+def test_input_delay(name, record):
+    u, _ = record
+    y = _duffing(np.concatenate([np.zeros((3, 1)), u[:-3]])) + 3.0
+    model = FACTORIES[name](n_states=2, input_delay=3).fit(u, y)
+    # The linear model it starts from sees the same delayed input.
+    assert model.bla_.get_params()["input_delay"] == 3
+    np.testing.assert_array_equal(model.bla_.input_delay_, [3])
+    if name == "Decoupled":
+        np.testing.assert_array_equal(model.pnlss_.input_delay_, [3])
+    without = FACTORIES[name](n_states=2).fit(u, y)
+    for fitted in (model, model.bla_):
+        assert rms_error(y[50:], fitted.predict(u)[50:]) < 0.5 * rms_error(
+            y[50:], without.predict(u)[50:])
+
+
+@pytest.mark.parametrize("name", FACTORIES)
 def test_validation_auto_ranks_starts_on_the_common_end(name, record):
     u, y = record
     model = FACTORIES[name](n_states=2, validation_fraction="auto", n_init=3).fit(u, y)
@@ -292,9 +308,17 @@ def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
     # record, which is also what a mode that does not decay takes.
     starts = np.array([0, 1000])
     A = np.diag([radius, 0.0])
-    assert PNLSSRegressor(2)._cost_transient(A, starts) == skipped
-    assert PNLSSRegressor(2, n_transient=200)._cost_transient(A, starts) == 200
-    assert PNLSSRegressor(2, estimate_x0=True)._cost_transient(A, starts) == 0
+
+    def cost_transient(**params):
+        model = PNLSSRegressor(2, **params)
+        model.input_delay_ = np.array([params.get("input_delay", 0)])  # as fit sets it
+        return model._cost_transient(A, starts)
+
+    assert cost_transient() == skipped
+    # The unmeasured input that a delay brings in starts a transient too.
+    assert cost_transient(input_delay=3) == min(skipped + 3, 100)
+    assert cost_transient(n_transient=200) == 200
+    assert cost_transient(estimate_x0=True) == 0
 
 
 def test_fallback_to_the_linear_model_is_reported(record):

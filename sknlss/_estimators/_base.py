@@ -29,13 +29,15 @@ from sklearn.utils.validation import (
 
 from .._core._kernels import DIVERGENCE_BOUND
 from .._core._multistart import fit_initial_state
-from .._core._sequences import sequence_bounds, transient_mask
+from .._core._sequences import (delayed_input, periodic_sequences, sequence_bounds,
+                                transient_mask)
 from .._validation import Integers, binary_magnitude, naming
 from ..exceptions import SimulationDivergedWarning, warn_at_caller
 
-#: The fitted attributes that describe the normalisation of the signals.
+#: The fitted attributes that describe the normalisation of the signals (and
+#: the delay of the inputs, which the model sees delayed).
 _NORMALISATION = ("n_features_in_", "n_outputs_", "_y_was_1d", "u_offset_", "u_scale_",
-                  "y_offset_", "y_scale_")
+                  "y_offset_", "y_scale_", "input_delay_")
 
 
 def normalisation_of(estimator):
@@ -86,6 +88,31 @@ def _refuse_gaps(values, argument):
             f"{argument} contains NaN or infinity in {rows.size} row(s), the first at row "
             f"{rows[0]}. A record has no gaps: interpolate the missing samples, or split "
             "the record at the gap into sequences (sequence_id).")
+
+
+def _input_delays(input_delay, n_inputs, starts):
+    """``input_delay`` as one non-negative integer per input column, checked
+    against the sequences of the training data."""
+    delay = np.asarray(input_delay)
+    if delay.ndim == 0:
+        delay = np.full(n_inputs, delay)
+    if (delay.shape != (n_inputs,) or not np.issubdtype(delay.dtype, np.number)
+            or np.any(delay < 0) or np.any(delay != np.round(delay))):
+        raise ValueError(
+            "input_delay must be a non-negative integer, or one per input column "
+            f"({n_inputs}); got {input_delay!r}.")
+    delay = delay.astype(np.int64)
+    _check_delay_fits(delay, starts)
+    return delay
+
+
+def _check_delay_fits(delay, starts):
+    """Refuse sequences whose every sample would see an unmeasured input."""
+    shortest = int(np.min(np.diff(starts)))
+    if np.max(delay, initial=0) >= shortest:
+        raise ValueError(
+            f"input_delay={delay.tolist()} is not shorter than a sequence of {shortest} "
+            "sample(s): its output would depend on no measured input.")
 
 
 def _offset_and_scale(values, argument, what):
@@ -155,6 +182,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
     """
 
     _parameter_constraints: dict = {
+        "input_delay": [Integers(0, None, closed="left"), "array-like"],
         "n_transient": [Integers(0, None, closed="left")],
     }
 
@@ -211,10 +239,11 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         self._y_was_1d = y.ndim == 1
         Y = y.reshape(len(y), -1) if y.ndim == 1 else y
         starts = sequence_bounds(sequence_id, X.shape[0])
+        self.input_delay_ = _input_delays(self.input_delay, X.shape[1], starts)
         self.n_outputs_ = Y.shape[1]
         self.u_offset_, self.u_scale_ = _offset_and_scale(X, "X", "input column(s)")
         self.y_offset_, self.y_scale_ = _offset_and_scale(Y, "y", "output(s)")
-        U = _normalised(X, self.u_offset_, self.u_scale_)
+        U = self._model_input(X, starts)
         Yn = _normalised(Y, self.y_offset_, self.y_scale_)
         return U, Yn, starts
 
@@ -256,6 +285,17 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
     def _fitted_model(self):
         """The fitted model: a :class:`~sknlss._core._model.StateSpaceModel`
         and its parameter vector."""
+
+    def _model_input(self, X, starts):
+        """The input the model sees: ``X`` normalised, then delayed by
+        ``input_delay_`` (a sequence that repeats with the estimator's
+        ``period`` continued periodically before its start)."""
+        U = _normalised(X, self.u_offset_, self.u_scale_)
+        if not np.any(self.input_delay_):
+            return U
+        period = getattr(self, "period", None)
+        repeating = None if period is None else periodic_sequences(U, starts, period)
+        return delayed_input(U, starts, self.input_delay_, period, repeating)
 
     def _scored_rows(self, starts, X):
         """The rows ``score`` compares for the input ``X``: all but the first
@@ -332,7 +372,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         # A state the user passes starts the simulation, periodic data or not.
         steady_state = x0 is None
         x0 = self._initial_states(x0, len(starts) - 1)
-        U = _normalised(X, self.u_offset_, self.u_scale_)
+        _check_delay_fits(self.input_delay_, starts)
+        U = self._model_input(X, starts)
         Yn, states, diverged = self._simulate_normalized(U, starts, x0, steady_state)
         with np.errstate(over="ignore", invalid="ignore"):
             Y = self.y_offset_ + self.y_scale_ * Yn
@@ -425,8 +466,10 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
                 f"estimate_initial_state: {Y.size} output value(s) cannot determine the "
                 f"{start.size} states; the state returned is one of many that fit them. "
                 "Pass more samples.", UserWarning)
+        starts = np.array([0, len(X)])
+        _check_delay_fits(self.input_delay_, starts)
         model, theta = self._fitted_model()
-        return fit_initial_state(model, theta, _normalised(X, self.u_offset_, self.u_scale_),
+        return fit_initial_state(model, theta, self._model_input(X, starts),
                                  _normalised(Y, self.y_offset_, self.y_scale_), start,
                                  max_iter=max_iter)
 

@@ -407,6 +407,17 @@ class BLAEstimator(_BaseStateSpace):
         Estimate the initial state (one state shared by all sequences) and a
         correction of the output offset by linear least squares on the
         estimation data; else ``x0_`` is zero.
+    input_delay : int or array-like of int, default=0
+        Dead time, in samples, between each input and its first effect on the
+        states and outputs (one value for every input column, or one per
+        column), as the ``nk`` or ``InputDelay`` of MATLAB's models. The model
+        is identified on, and simulates, the inputs delayed by it, so that a
+        delay costs no states; ``frf_``, the poles and ``A_``, ``B_``, ``C_``,
+        ``D_`` are those of the delay-free part (multiply ``frf_`` by
+        ``exp(-2j * pi * f * input_delay)``, ``f`` in cycles per sample, for
+        the FRF from the input itself). Before the start of a sequence the
+        delayed input was not measured: a sequence whose input repeats with
+        ``period`` is continued periodically, any other with its mean.
     n_transient : int, default=0
         Samples at the start of each sequence left out: of the least-squares
         initial state and the score, and of the FRF (with ``period``, the first
@@ -571,6 +582,7 @@ class BLAEstimator(_BaseStateSpace):
         max_iter=100,
         tol=1e-10,
         estimate_x0=False,
+        input_delay=0,
         n_transient=0,
         verbose=0,
     ):
@@ -584,6 +596,7 @@ class BLAEstimator(_BaseStateSpace):
         self.max_iter = max_iter
         self.tol = tol
         self.estimate_x0 = estimate_x0
+        self.input_delay = input_delay
         self.n_transient = n_transient
         self.verbose = verbose
 

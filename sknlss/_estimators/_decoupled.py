@@ -30,8 +30,8 @@ from ._pnlss import PNLSSRegressor
 _SHRINK_FACTORS = (1.0, 0.5, 0.25, 0.1, 0.01, 0.0)
 
 # The PNLSS settings that the decoupled model passes on to its PNLSS model.
-_FORWARDED = ("n_states", "estimate_x0", "period", "cost", "validation_fraction",
-              "n_transient", "n_jobs", "random_state")
+_FORWARDED = ("n_states", "input_delay", "estimate_x0", "period", "cost",
+              "validation_fraction", "n_transient", "n_jobs", "random_state")
 
 
 def _stack_polynomials(E, state_exponents, F, output_exponents):
@@ -128,7 +128,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``n_transient`` holds it (see ``n_transient``).
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
-        ``n_states``, ``estimate_x0``, ``period``, ``cost``,
+        ``n_states``, ``input_delay``, ``estimate_x0``, ``period``, ``cost``,
         ``validation_fraction``, ``n_transient``, ``n_jobs`` and
         ``random_state`` from this estimator, and its normalisation of the
         signals (``center``) is used by the decoupled model too. ``None``
@@ -195,6 +195,16 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Number of joblib workers for the starts (of the PNLSS model too).
     random_state : int, RandomState instance or None, default=None
         Seeds the sampling points and the CPD initialisations.
+    input_delay : int or array-like of int, default=0
+        Dead time, in samples, between each input and its first effect on the
+        states and outputs (one value for every input column, or one per
+        column), as the ``nk`` or ``InputDelay`` of MATLAB's models. The model
+        is identified on, and simulates, the inputs delayed by it, so that a
+        delay costs no states; ``A_``, ``B_``, ``C_``, ``D_`` and ``bla_`` are
+        those of the delay-free part. Before the start of a sequence the
+        delayed input was not measured: a sequence whose input repeats with
+        ``period`` is continued periodically, any other with its mean. Without
+        ``estimate_x0`` and ``period``, the cost also skips the largest delay.
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state
@@ -365,6 +375,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         n_init=5,
         n_jobs=None,
         random_state=None,
+        input_delay=0,
         n_transient=0,
         verbose=0,
     ):
@@ -389,6 +400,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self.n_init = n_init
         self.n_jobs = n_jobs
         self.random_state = random_state
+        self.input_delay = input_delay
         self.n_transient = n_transient
         self.verbose = verbose
 

@@ -352,8 +352,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         would make a stable linear part unstable.
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
-        this model's ``n_states``, ``estimate_x0`` and (if its own is None)
-        ``period``. ``None`` uses :class:`~sknlss.BLAEstimator`'s defaults.
+        this model's ``n_states``, ``input_delay``, ``estimate_x0`` and (if its
+        own is None) ``period``. ``None`` uses
+        :class:`~sknlss.BLAEstimator`'s defaults.
     max_iter : int, default=100
         Maximum number of Levenberg-Marquardt iterations of each start.
     tol : float, default=1e-9
@@ -387,6 +388,16 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         Number of joblib workers for the starts.
     random_state : int, RandomState instance or None, default=None
         Seeds the random branch directions.
+    input_delay : int or array-like of int, default=0
+        Dead time, in samples, between each input and its first effect on the
+        states and outputs (one value for every input column, or one per
+        column), as the ``nk`` or ``InputDelay`` of MATLAB's models. The model
+        is identified on, and simulates, the inputs delayed by it, so that a
+        delay costs no states; ``A_``, ``B_``, ``C_``, ``D_`` and ``bla_`` are
+        those of the delay-free part. Before the start of a sequence the
+        delayed input was not measured: a sequence whose input repeats with
+        ``period`` is continued periodically, any other with its mean. Without
+        ``estimate_x0`` and ``period``, the cost also skips the largest delay.
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state
@@ -523,7 +534,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
                  stability_penalty=0.0, weight_decay=0.0, refine_linear=False, bla=None,
                  max_iter=100, tol=1e-9, validation_fraction="auto", refit=False,
                  n_iter_no_change=None, n_init=5, n_jobs=None, random_state=None,
-                 n_transient=0, verbose=0):
+                 input_delay=0, n_transient=0, verbose=0):
         self.n_states = n_states
         self.n_branches = n_branches
         self.basis = basis
@@ -544,6 +555,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.n_init = n_init
         self.n_jobs = n_jobs
         self.random_state = random_state
+        self.input_delay = input_delay
         self.n_transient = n_transient
         self.verbose = verbose
 

@@ -38,8 +38,8 @@ from .._core._memory import check_memory
 from .._core._model import StateSpaceModel, parameter_count
 from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
-from .._core._sequences import (holdout_masks, part_before_holdout, periodic_sequences,
-                                steady_state_rows, transient_mask)
+from .._core._sequences import (PERIODIC_TOLERANCE, holdout_masks, part_before_holdout,
+                                periodic_sequences, steady_state_rows, transient_mask)
 from .._linear._realization import spectral_radius
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import DataWarning, LinearFallbackWarning, warn_at_caller
@@ -73,11 +73,6 @@ _GUARD_RANGE = 10.0
 #: fresh simulated records came from starts within 1.5 times the best.
 _ESCAPE_GAIN = 2.0
 _ESCAPE_TOLERANCE = 2.0
-#: With ``period``, a sequence is simulated in steady state only when its
-#: periods differ from their mean by at most this fraction of its standard
-#: deviation: a random input differs by 70 % or more (two periods or more), a
-#: measured periodic one by its noise.
-_PERIODIC_TOLERANCE = 0.2
 #: With ``center=False``, a signal whose mean exceeds this many standard
 #: deviations warns: its zero, around which the model is expanded, then lies
 #: outside the bulk of its samples.
@@ -207,13 +202,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     f"With period={self.period}, every sequence must hold a whole number "
                     f"of periods; got sequence lengths {lengths.tolist()}."
                 )
-            repeating = periodic_sequences(U, starts, self.period, _PERIODIC_TOLERANCE)
+            repeating = periodic_sequences(U, starts, self.period)
             if not repeating.all():
                 warn_at_caller(
                     f"{type(self).__name__}: the input of sequence(s) "
                     f"{np.flatnonzero(~repeating).tolist()} (in the order of the rows) does "
                     f"not repeat with period={self.period}: its periods differ by more than "
-                    f"{_PERIODIC_TOLERANCE:.0%} of its standard deviation. The fit treats "
+                    f"{PERIODIC_TOLERANCE:.0%} of its standard deviation. The fit treats "
                     "every sequence as periodic; predict simulates such a sequence from "
                     "its initial state.", DataWarning)
             # One estimated initial state can absorb the start of one sequence,
@@ -243,7 +238,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         starts from, keyed by block name: the BLA on the rows before the
         held-out tails (also set as ``bla_``, in the user's units)."""
         params = (self.bla if self.bla is not None else BLAEstimator()).get_params()
-        params.update(n_states=self.n_states, estimate_x0=self.estimate_x0)
+        params.update(n_states=self.n_states, estimate_x0=self.estimate_x0,
+                      input_delay=self.input_delay)
         if params["period"] is None:
             params["period"] = self.period
         linear = fit_linear_model(*part_before_holdout(U, Y, starts, fit_mask), params)
@@ -340,13 +336,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     def _cost_transient(self, A, starts):
         """Samples per sequence left out of the cost: ``n_transient``, and without
         an estimated initial state, at least the settling time of the linear
-        model's slowest pole (a record rarely starts at rest)."""
+        model's slowest pole (a record rarely starts at rest) after the
+        largest input delay (whose unmeasured samples start it too)."""
         if self.estimate_x0 or self.period is not None:
             return self.n_transient
         # A mode that does not decay never settles (the decoupled model starts
         # from a PNLSS model's linear part, which may grow).
         limit = int(_MAX_TRANSIENT_SHARE * np.min(np.diff(starts)))
-        return max(self.n_transient, min(_settling_time(A), limit))
+        settled = _settling_time(A) + int(np.max(self.input_delay_, initial=0))
+        return max(self.n_transient, min(settled, limit))
 
     def _structure(self):
         """The structure parameters and their values, for messages."""
@@ -616,7 +614,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         state)."""
         if self.period is None or self.n_transient == 0:
             return np.zeros(len(starts) - 1, dtype=bool)
-        return periodic_sequences(U, starts, self.period, _PERIODIC_TOLERANCE)
+        return periodic_sequences(U, starts, self.period)
 
     def _scored_rows(self, starts, X):
         # As in the cost, every sample of a steady-state sequence counts.

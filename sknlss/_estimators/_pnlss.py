@@ -115,8 +115,9 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         a long one.
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
-        this model's ``n_states``, ``estimate_x0`` and (if its own is None)
-        ``period``. ``None`` uses :class:`~sknlss.BLAEstimator`'s defaults.
+        this model's ``n_states``, ``input_delay``, ``estimate_x0`` and (if its
+        own is None) ``period``. ``None`` uses
+        :class:`~sknlss.BLAEstimator`'s defaults.
     max_iter : int, default=200
         Maximum number of Levenberg-Marquardt iterations of each start.
     tol : float, default=1e-9
@@ -150,6 +151,16 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         Number of joblib workers for the starts.
     random_state : int, RandomState instance or None, default=None
         Seeds the starts after the first.
+    input_delay : int or array-like of int, default=0
+        Dead time, in samples, between each input and its first effect on the
+        states and outputs (one value for every input column, or one per
+        column), as the ``nk`` or ``InputDelay`` of MATLAB's models. The model
+        is identified on, and simulates, the inputs delayed by it, so that a
+        delay costs no states; ``A_``, ``B_``, ``C_``, ``D_`` and ``bla_`` are
+        those of the delay-free part. Before the start of a sequence the
+        delayed input was not measured: a sequence whose input repeats with
+        ``period`` is continued periodically, any other with its mean. Without
+        ``estimate_x0`` and ``period``, the cost also skips the largest delay.
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state
@@ -296,6 +307,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         n_init=5,
         n_jobs=None,
         random_state=None,
+        input_delay=0,
         n_transient=0,
         verbose=0,
     ):
@@ -320,6 +332,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         self.n_init = n_init
         self.n_jobs = n_jobs
         self.random_state = random_state
+        self.input_delay = input_delay
         self.n_transient = n_transient
         self.verbose = verbose
 
