@@ -464,3 +464,14 @@ def test_input_delay_per_input_column():
                           {"input_delay": [[a, b] for a in range(3) for b in range(3, 6)]},
                           cv=TimeSeriesSplit(3)).fit(U.T, y_measured)
     assert search.best_params_["input_delay"] == [1, 4]
+
+
+def test_a_dead_time_left_to_the_states_is_named_in_the_warning():
+    rng = np.random.default_rng(0)
+    u = lfilter([1.0], [1.0, -0.5], rng.standard_normal(2000))
+    y = lfilter([0.1], [1.0, -1.6, 0.68], _delayed(u, 8))
+    with pytest.warns(UserWarning, match="worse than the output's mean.*set input_delay"):
+        BLAEstimator(n_states=2).fit(u[:, None], y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        BLAEstimator(n_states=2, input_delay=8).fit(u[:, None], y)

@@ -621,7 +621,9 @@ class BLAEstimator(_BaseStateSpace):
             "least-squares initial state). Either the data hold little linear relation "
             "from X to y, or a few FRF lines far from the rest pull the fit, typically "
             "at the edge of the excited band (input leakage, closed-loop data): compare "
-            f"frf_ with frf_model_ and try {remedy}.",
+            f"frf_ with frf_model_ and try {remedy}; or the output responds to the input "
+            "only after a dead time, which these states cannot hold: set input_delay "
+            "(see the user guide).",
             UserWarning)
 
     def _fitted_model(self):

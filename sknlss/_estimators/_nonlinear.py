@@ -487,8 +487,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         advice = ("Try center=True: with center=False the model has to produce the "
                   "signals' offsets through its dynamics." if not self._centred() else
                   "Check bla_, the linear model it starts from (compare its frf_ with its "
-                  "frf_model_): an input that excites few frequencies, or little linear "
-                  "relation from X to y, gives a poor start.")
+                  "frf_model_): an input that excites few frequencies, little linear "
+                  "relation from X to y, or a dead time not given as input_delay gives a "
+                  "poor start.")
         warn_at_caller(
             f"{type(self).__name__}({self._structure()}) simulates its estimation record "
             f"worse than the output's mean (normalised RMS error {error:.3g}; "
