@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter, lfiltic
 from sklearn.datasets import load_iris
+from _hints import named_delays
 
 from sknlss import BLAEstimator
 from sknlss._estimators import _bla
@@ -466,12 +467,27 @@ def test_input_delay_per_input_column():
     assert search.best_params_["input_delay"] == [1, 4]
 
 
-def test_a_dead_time_left_to_the_states_is_named_in_the_warning():
+@pytest.mark.parametrize("delay, cubic", itertools.product([3, 8], [0.0, 0.3]))
+def test_a_dead_time_left_to_the_states_is_named_in_the_warning(delay, cubic):
     rng = np.random.default_rng(0)
     u = lfilter([1.0], [1.0, -0.5], rng.standard_normal(2000))
-    y = lfilter([0.1], [1.0, -1.6, 0.68], _delayed(u, 8))
-    with pytest.warns(UserWarning, match="worse than the output's mean.*set input_delay"):
+    v = _delayed(u, delay)
+    y = lfilter([0.1], [1.0, -1.6, 0.68], v + cubic * v**3)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         BLAEstimator(n_states=2).fit(u[:, None], y)
+    hints = [str(w.message) for w in caught if "responds to the input late" in str(w.message)]
+    assert len(hints) == 1
+    assert delay in named_delays(hints[0]) and "input_delay" in hints[0]
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        BLAEstimator(n_states=2, input_delay=8).fit(u[:, None], y)
+        BLAEstimator(n_states=2, input_delay=delay).fit(u[:, None], y)
+
+
+def test_the_worse_than_the_mean_warning_names_input_delay():
+    rng = np.random.default_rng(0)
+    u = lfilter([1.0], [1.0, -0.5], rng.standard_normal(2000))
+    v = _delayed(u, 3)
+    y = lfilter([0.1], [1.0, -1.6, 0.68], v + 0.3 * v**3)
+    with pytest.warns(UserWarning, match="worse than the output's mean.*set input_delay"):
+        BLAEstimator(n_states=2).fit(u[:, None], y)

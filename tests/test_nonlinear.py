@@ -10,6 +10,7 @@ from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.metrics import r2_score
 from sklearn.utils._param_validation import InvalidParameterError
+from _hints import named_delays
 
 from sknlss import (
     BLAEstimator,
@@ -258,6 +259,20 @@ def test_input_delay(name, record):
     for fitted in (model, model.bla_):
         assert rms_error(y[50:], fitted.predict(u)[50:]) < 0.5 * rms_error(
             y[50:], without.predict(u)[50:])
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_a_dead_time_left_to_the_states_is_named(name):
+    u = lfilter([1.0], [1.0, -0.5], np.random.default_rng(0).standard_normal((1000, 1)),
+                axis=0)
+    v = np.concatenate([np.zeros((6, 1)), u[:-6]])
+    y = lfilter([0.1], [1.0, -1.6, 0.68], v[:, 0] + 0.3 * v[:, 0] ** 3)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        FACTORIES[name](n_states=2).fit(u, y)
+    hints = [str(w.message) for w in caught if "responds to the input late" in str(w.message)]
+    assert len(hints) == 1
+    assert 6 in named_delays(hints[0])
 
 
 @pytest.mark.parametrize("name", FACTORIES)
