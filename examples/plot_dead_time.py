@@ -3,8 +3,8 @@ A plant with dead time
 ======================
 
 A transport delay between the input and its first effect is common in
-process data. A discrete-time state-space model can only hold a delay of
-``d`` samples in ``d`` extra states, so a model whose order is chosen for the
+process data. A discrete-time state-space model holds a delay of ``d``
+samples in up to ``d`` extra states, so a model whose order is chosen for the
 dynamics fits badly. ``input_delay`` gives every estimator the delay instead:
 the model is identified on the delayed input and needs no states for it.
 
@@ -53,9 +53,11 @@ X_est, X_test = u_est[:, None], u_test[:, None]
 # Finding the delay
 # -----------------
 # A BLA fitted without ``input_delay`` notices a late response by itself:
-# when it leaves more than half of the output's spread unexplained, its fit
-# tries the input delayed by up to 20 samples and names the delays that halve
-# the error. Here its nonlinear distortions hide which of them is right.
+# when it simulates its data with an RMS error above half the output's
+# standard deviation, its fit tries the input delayed by up to 20 samples and
+# names the delays that halve the error. The plant has no zeros, so two states
+# can themselves delay the response by up to two samples: delays of 1, 2 and
+# 3 give the same model here, and any of them holds the dead time.
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
     BLAEstimator(n_states=2).fit(X_est, y_est)
@@ -65,15 +67,16 @@ print(textwrap.fill(hint, 79))
 # %%
 # An unknown delay is also a structure parameter like the model order, which
 # a grid search on the BLA finds quickly. Each fold of the time-series split
-# is scored after a transient, since it starts from the fitted initial state.
-# The fits with too short a delay warn as above; they are counted here.
+# starts from rest, so it is scored after a transient. The fits without a
+# delay warn as above (and as worse than the output's mean); the warnings are
+# counted here.
 search = GridSearchCV(BLAEstimator(n_states=2, n_transient=50),
                       {"input_delay": range(8)}, cv=TimeSeriesSplit(3))
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
     delay = search.fit(X_est, y_est).best_params_["input_delay"]
 print(f"delay found on the estimation record: {delay} samples "
-      f"({len(caught)} warnings from the 24 fits of the search)")
+      f"({len(caught)} warnings from the 25 fits of the search)")
 
 # %%
 # Models with and without the delay

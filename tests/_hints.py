@@ -4,9 +4,10 @@ import re
 
 
 def named_delays(message):
-    """The input delays that the dead-time warning of the linear model names."""
-    named = re.search(r"delayed by ([\d, to]+) sample\(s\)", message).group(1)
-    if " to " in named:
-        first, last = map(int, named.split(" to "))
-        return set(range(first, last + 1))
-    return {int(delay) for delay in named.split(", ")}
+    """The input delays that the dead-time warning of the linear model names:
+    the best, and those within a few percent of it."""
+    delays = {int(re.search(r"delayed by (\d+) sample\(s\)", message).group(1))}
+    others = re.search(r"and by ([\d, or]+) sample\(s\) within", message)
+    if others:
+        delays |= {int(delay) for delay in re.split(r", | or ", others.group(1))}
+    return delays

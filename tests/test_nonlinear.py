@@ -261,6 +261,28 @@ def test_input_delay(name, record):
             y[50:], without.predict(u)[50:])
 
 
+@pytest.mark.parametrize("center", [True, False])
+def test_fit_and_predict_see_the_same_delayed_input(center, record, monkeypatch):
+    u, y = record
+    X = u + 5.0  # an offset, which center=False keeps
+    starts = np.array([0, len(X)])
+    seen = {}
+
+    def capture(model, U, Y, starts):
+        seen["fit"] = U.copy()
+        seen["predict"] = model._model_input(X, starts)
+        raise RuntimeError("captured")
+
+    monkeypatch.setattr(PNLSSRegressor, "_fit_normalized", capture)
+    with pytest.raises(RuntimeError, match="captured"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        PNLSSRegressor(center=center, input_delay=2).fit(X, y)
+    # Uncentred, fit adds the offset back to the centred signal: rounding apart.
+    np.testing.assert_allclose(seen["fit"], seen["predict"], rtol=1e-14)
+    # Before the start: the input's mean centred, its zero uncentred.
+    assert np.all(seen["fit"][:2] == 0.0) and seen["fit"][2, 0] != 0.0
+
+
 @pytest.mark.parametrize("name", FACTORIES)
 def test_a_dead_time_left_to_the_states_is_named(name):
     u = lfilter([1.0], [1.0, -0.5], np.random.default_rng(0).standard_normal((1000, 1)),

@@ -243,7 +243,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         self.n_outputs_ = Y.shape[1]
         self.u_offset_, self.u_scale_ = _offset_and_scale(X, "X", "input column(s)")
         self.y_offset_, self.y_scale_ = _offset_and_scale(Y, "y", "output(s)")
-        U = self._model_input(X, starts)
+        U = _normalised(X, self.u_offset_, self.u_scale_)
         Yn = _normalised(Y, self.y_offset_, self.y_scale_)
         return U, Yn, starts
 
@@ -274,7 +274,9 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """The work of ``fit``, for subclasses whose ``fit`` sets attributes first."""
         self._validate_params()
         U, Y, starts = self._validate_training_data(X, y, sequence_id)
-        self._fit_normalized(U, Y, starts)
+        # Delayed once the offsets are final (a subclass may leave the signals
+        # uncentred), as predict delays them.
+        self._fit_normalized(self._delayed(U, starts), Y, starts)
         return self
 
     @abstractmethod
@@ -287,10 +289,13 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         and its parameter vector."""
 
     def _model_input(self, X, starts):
-        """The input the model sees: ``X`` normalised, then delayed by
-        ``input_delay_`` (a sequence that repeats with the estimator's
-        ``period`` continued periodically before its start)."""
-        U = _normalised(X, self.u_offset_, self.u_scale_)
+        """The input the model sees: ``X`` normalised, then delayed."""
+        return self._delayed(_normalised(X, self.u_offset_, self.u_scale_), starts)
+
+    def _delayed(self, U, starts):
+        """Normalised inputs ``U`` delayed by ``input_delay_``, a sequence that
+        repeats with the estimator's ``period`` continued periodically before
+        its start."""
         if not np.any(self.input_delay_):
             return U
         period = getattr(self, "period", None)

@@ -7,7 +7,7 @@ estimators call it for their initialisation and expose the result as a fitted
 """
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from numbers import Real
 
 import numpy as np
@@ -62,7 +62,7 @@ _STRICT_POWER_THRESHOLD = 1e-2
 _DEAD_TIME_LEVEL = 0.5
 _DELAY_GAIN = 0.5
 _MAX_CHECKED_DELAY = 20
-# Delays whose errors are within this factor of the best are named with it.
+# Delays whose errors are within this factor of the best are named beside it.
 _DELAY_TIE = 1.05
 
 
@@ -209,59 +209,73 @@ def fit_linear_model(U, Y, starts, params):
 
 
 def _fit_linear_model(U, Y, starts, params):
-    fit = _best_linear_fit(U, Y, starts, params)
+    estimates = _nonparametric(U, Y, starts, params)
+    fit = _best_linear_fit(estimates, U, Y, starts, params)
     if fit.simulation_error > _DEAD_TIME_LEVEL and not np.any(params["input_delay"]):
-        _check_dead_time(U, Y, starts, params, fit.simulation_error)
+        _check_dead_time(estimates[0], U, Y, starts, params, fit.simulation_error)
     return fit
 
 
-def _check_dead_time(U, Y, starts, params, error):
-    """Warn when the same linear model of the inputs delayed by a few samples
-    simulates the estimation rows far better: the output responds late,
-    which the model's states cannot hold."""
+def _check_dead_time(estimate, U, Y, starts, params, error):
+    """Warn when a model of the same order fitted to the inputs delayed by a
+    few samples simulates the estimation rows far better: the output responds
+    late, which the model's states cannot hold.
+
+    The FRF from the delayed inputs is ``estimate`` with the delay's phase
+    removed, so each trial costs a parametric fit, not a nonparametric one.
+    """
     longest = min(_MAX_CHECKED_DELAY, int(np.min(np.diff(starts))) // 10)
     period = params["period"]
     repeating = None if period is None else np.ones(len(starts) - 1, dtype=bool)
+    mask = transient_mask(starts, params["n_transient"])
+    # The subspace model alone ranks the delays; its refinement would cost
+    # more than the rest of the trial.
+    trial = {**params, "max_iter": 0}
     errors = {}
     # What the trial fits would warn about was said by the fit itself.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for delay in range(1, longest + 1):
+            advance = np.exp(2j * np.pi * estimate.frequencies * delay)[:, None, None]
             U_delayed = delayed_input(U, starts, np.full(U.shape[1], delay), period,
                                       repeating)
             try:
-                errors[delay] = _best_linear_fit(U_delayed, Y, starts,
-                                                 params).simulation_error
+                errors[delay] = _parametric(replace(estimate, frf=estimate.frf * advance),
+                                            U_delayed, Y, starts, mask,
+                                            trial).simulation_error
             except (ValueError, np.linalg.LinAlgError):
                 continue
-    best = min(errors.values(), default=np.inf)
-    if best > _DELAY_GAIN * error:
+    best = min(errors, key=errors.get, default=None)
+    if best is None or errors[best] > _DELAY_GAIN * error:
         return
-    # The distortions leave the error flat over the delays that the states can
-    # absorb: every delay near the best is named.
-    near = [delay for delay, value in errors.items() if value <= _DELAY_TIE * best]
-    if len(near) == 1:
-        delays, spread = str(near[0]), ""
-        advice = f"set input_delay={near[0]} (a dead time, see the user guide)"
-    else:
-        delays = (f"{near[0]} to {near[-1]}" if near[-1] - near[0] == len(near) - 1
-                  else ", ".join(map(str, near)))
-        spread = f" (the best; the others within {_DELAY_TIE - 1:.0%})"
-        advice = ("set input_delay to one of these delays (a dead time; a grid search over "
-                  "input_delay tells them apart, see the user guide)")
+    # A plant whose response starts late through its states too (a relative
+    # degree above one) gives the same model for several delays: all the
+    # delays near the best are named.
+    others = [delay for delay, value in errors.items()
+              if delay != best and value <= _DELAY_TIE * errors[best]]
+    tied = "" if not others else (
+        f", and by {_listed(others)} sample(s) within {100 * (_DELAY_TIE - 1):.0f} % of "
+        "that (any of them holds the dead time; a grid search over input_delay chooses)")
     warn_at_caller(
         f"The linear model (n_states={params['n_states']}) simulates its estimation "
-        f"record with a normalised RMS error of {error:.3g}; the same model of the input "
-        f"delayed by {delays} sample(s) gives {best:.3g}{spread}. The output responds to "
-        f"the input late, which these states cannot hold: {advice}, or use more states.",
-        UserWarning)
+        f"record with a normalised RMS error of {error:.3g}; a model of the same order "
+        f"fitted to the input delayed by {best} sample(s) gives {errors[best]:.3g}{tied}. "
+        f"The output responds to the input late, which n_states={params['n_states']} "
+        f"cannot hold: set input_delay={best} (see the user guide, 'Dead time'), or use "
+        "more states.", UserWarning)
 
 
-def _best_linear_fit(U, Y, starts, params):
-    """The linear model of the nonparametric estimates that simulates the
+def _listed(delays):
+    """``[1, 2, 4]`` as "1, 2 or 4"."""
+    words = [str(delay) for delay in delays]
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
+
+
+def _best_linear_fit(estimates, U, Y, starts, params):
+    """The linear model of the nonparametric ``estimates`` that simulates the
     estimation rows best (see :func:`fit_linear_model`)."""
     mask = transient_mask(starts, params["n_transient"])
-    first, *others = _nonparametric(U, Y, starts, params)
+    first, *others = estimates
     fits = [_parametric(first, U, Y, starts, mask, params)]
     # A few far-off lines can pull the LPM model away, typically the leakage
     # of an input that is not periodic in the record just above its band edge
@@ -471,16 +485,19 @@ class BLAEstimator(_BaseStateSpace):
         correction of the output offset by linear least squares on the
         estimation data; else ``x0_`` is zero.
     input_delay : int or array-like of int, default=0
-        Dead time, in samples, between each input and its first effect on the
-        states and outputs (one value for every input column, or one per
-        column), as the ``nk`` or ``InputDelay`` of MATLAB's models. The model
-        is identified on, and simulates, the inputs delayed by it, so that a
-        delay costs no states; ``frf_``, the poles and ``A_``, ``B_``, ``C_``,
-        ``D_`` are those of the delay-free part (multiply ``frf_`` by
-        ``exp(-2j * pi * f * input_delay)``, ``f`` in cycles per sample, for
-        the FRF from the input itself). Before the start of a sequence the
-        delayed input was not measured: a sequence whose input repeats with
-        ``period`` is continued periodically, any other with its mean.
+        Dead time in samples between each input column and its first effect
+        (one value for every column, or one per column), as MATLAB's
+        ``InputDelay``: the model is identified on, and simulates, ``u(t - d)``
+        (the output can respond at lag ``d`` through ``D_``), so the delay
+        costs no states. ``frf_``, ``frf_model_``, the variances, the poles
+        and ``A_``, ``B_``, ``C_``, ``D_`` are those of the delay-free part (the
+        user guide gives the FRF from the undelayed input). Before the start
+        of a sequence the delayed input was not measured: a sequence whose
+        input repeats with ``period`` is continued periodically, any other
+        takes the training input's mean. With the default 0, a model that
+        simulates its data with a normalised RMS error above 0.5 is refitted
+        on delayed inputs, and a delay that halves that error is named in a
+        warning.
     n_transient : int, default=0
         Samples at the start of each sequence left out: of the least-squares
         initial state and the score, and of the FRF (with ``period``, the first

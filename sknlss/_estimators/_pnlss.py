@@ -152,15 +152,17 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     random_state : int, RandomState instance or None, default=None
         Seeds the starts after the first.
     input_delay : int or array-like of int, default=0
-        Dead time, in samples, between each input and its first effect on the
-        states and outputs (one value for every input column, or one per
-        column), as the ``nk`` or ``InputDelay`` of MATLAB's models. The model
-        is identified on, and simulates, the inputs delayed by it, so that a
-        delay costs no states; ``A_``, ``B_``, ``C_``, ``D_`` and ``bla_`` are
-        those of the delay-free part. Before the start of a sequence the
-        delayed input was not measured: a sequence whose input repeats with
-        ``period`` is continued periodically, any other with its mean. Without
-        ``estimate_x0`` and ``period``, the cost also skips the largest delay.
+        Dead time in samples between each input column and its first effect
+        (one value for every column, or one per column), as MATLAB's
+        ``InputDelay``: the model is identified on, and simulates, ``u(t - d)``
+        (the output can respond at lag ``d`` through the feedthrough), so the
+        delay costs no states. ``A_``, ``B_``, ``C_``, ``D_`` are those of the
+        delay-free part; ``bla_`` has the same ``input_delay_``. Before the
+        start of a sequence the delayed input was not measured: a sequence
+        whose input repeats with ``period`` is continued periodically, any
+        other takes ``u_offset_`` (the training input's mean; zero with
+        ``center=False``). Without ``estimate_x0`` and ``period``, the cost
+        also skips the largest delay (see the user guide).
     n_transient : int, default=0
         Samples per sequence excluded from the cost and the score; with
         ``period``, the number of samples prepended for the steady state
