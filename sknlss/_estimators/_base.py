@@ -289,7 +289,9 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         and its parameter vector."""
 
     def _model_input(self, X, starts):
-        """The input the model sees: ``X`` normalised, then delayed."""
+        """The input the model sees: ``X`` normalised, then delayed (sequences
+        not longer than the delay refused)."""
+        _check_delay_fits(self.input_delay_, starts)
         return self._delayed(_normalised(X, self.u_offset_, self.u_scale_), starts)
 
     def _delayed(self, U, starts):
@@ -377,7 +379,6 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         # A state the user passes starts the simulation, periodic data or not.
         steady_state = x0 is None
         x0 = self._initial_states(x0, len(starts) - 1)
-        _check_delay_fits(self.input_delay_, starts)
         U = self._model_input(X, starts)
         Yn, states, diverged = self._simulate_normalized(U, starts, x0, steady_state)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -471,10 +472,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
                 f"estimate_initial_state: {Y.size} output value(s) cannot determine the "
                 f"{start.size} states; the state returned is one of many that fit them. "
                 "Pass more samples.", UserWarning)
-        starts = np.array([0, len(X)])
-        _check_delay_fits(self.input_delay_, starts)
         model, theta = self._fitted_model()
-        return fit_initial_state(model, theta, self._model_input(X, starts),
+        return fit_initial_state(model, theta, self._model_input(X, np.array([0, len(X)])),
                                  _normalised(Y, self.y_offset_, self.y_scale_), start,
                                  max_iter=max_iter)
 

@@ -54,7 +54,7 @@ _LPM_MIN_SAMPLES = 3
 # Relative window power of the LPM's second model (see _fit_linear_model).
 _STRICT_POWER_THRESHOLD = 1e-2
 # A linear model fitted without input_delay whose simulation leaves more than
-# this normalised RMS error is refitted on the input delayed by up to
+# this normalised RMS error is tried on the input delayed by up to
 # _MAX_CHECKED_DELAY samples (and a tenth of the shortest sequence); a delay
 # that brings the error down to _DELAY_GAIN times it is named in a warning.
 # The linear models of the benchmarks stay at 0.31 or below; a plant whose
@@ -248,9 +248,9 @@ def _check_dead_time(estimate, U, Y, starts, params, error):
     best = min(errors, key=errors.get, default=None)
     if best is None or errors[best] > _DELAY_GAIN * error:
         return
-    # A plant whose response starts late through its states too (a relative
-    # degree above one) gives the same model for several delays: all the
-    # delays near the best are named.
+    # States delay a response themselves (a model without zeros by up to its
+    # order), so several delays can give the same model: all those near the
+    # best are named.
     others = [delay for delay, value in errors.items()
               if delay != best and value <= _DELAY_TIE * errors[best]]
     tied = "" if not others else (
