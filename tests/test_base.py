@@ -8,8 +8,8 @@ from sklearn.metrics import r2_score
 
 from sknlss import SimulationDivergedWarning
 from sknlss._core._model import StateSpaceModel
-from sknlss._core._sequences import (delayed_input, holdout_masks, sequence_bounds,
-                                     transient_mask)
+from sknlss._core._sequences import (delayed_input, holdout_masks, periodic_sequences,
+                                     sequence_bounds, transient_mask)
 from sknlss._estimators._base import _BaseStateSpace
 
 
@@ -68,27 +68,31 @@ def test_holdout_masks():
 
 
 @settings(max_examples=50, deadline=None)
-@given(lengths=st.lists(st.integers(6, 14), min_size=1, max_size=4),
+@given(n_periods=st.lists(st.integers(2, 5), min_size=1, max_size=4),
        delays=st.lists(st.integers(0, 5), min_size=1, max_size=3),
-       period=st.integers(1, 4), seed=st.integers(0, 2**16))
-def test_delayed_input(lengths, delays, period, seed):
+       period=st.integers(3, 6), seed=st.integers(0, 2**16))
+def test_delayed_input(n_periods, delays, period, seed):
     rng = np.random.default_rng(seed)
-    starts = np.concatenate([[0], np.cumsum(lengths)])
+    starts = np.concatenate([[0], np.cumsum(n_periods) * period])
+    # Every other sequence repeats one period; the others are random.
     U = rng.standard_normal((starts[-1], len(delays)))
-    # Only a sequence of whole periods can repeat (the callers' rule).
-    repeating = (rng.random(len(lengths)) < 0.5) & (np.array(lengths) % period == 0)
-    delayed = delayed_input(U, starts, np.array(delays), period, repeating)
-    for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
-        for j, lag in enumerate(delays):
-            for t in range(begin, end):
-                if t - lag >= begin:
-                    expected = U[t - lag, j]
-                elif repeating[k]:
-                    # The periodic continuation of the sequence before its start.
-                    expected = U[begin + (t - lag - begin) % period, j]
-                else:
-                    expected = 0.0
-                assert delayed[t, j] == expected
+    for k in range(0, len(n_periods), 2):
+        U[starts[k]:starts[k + 1]] = np.tile(U[starts[k]:starts[k] + period], (n_periods[k], 1))
+    repeating = periodic_sequences(U, starts, period)
+    assert repeating[::2].all()
+    for with_period in (period, None):
+        delayed = delayed_input(U, starts, np.array(delays), with_period)
+        for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
+            for j, lag in enumerate(delays):
+                for t in range(begin, end):
+                    if t - lag >= begin:
+                        expected = U[t - lag, j]
+                    elif with_period and repeating[k]:
+                        # The periodic continuation of the sequence before its start.
+                        expected = U[begin + (t - lag - begin) % period, j]
+                    else:
+                        expected = 0.0
+                    assert delayed[t, j] == expected
     assert delayed_input(U, starts, np.zeros(len(delays), int)) is U
 
 

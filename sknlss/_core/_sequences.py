@@ -192,13 +192,13 @@ def periodic_sequences(U, starts, period, tolerance=PERIODIC_TOLERANCE):
     return repeats
 
 
-def delayed_input(U, starts, delay, period=None, repeating=None):
+def delayed_input(U, starts, delay, period=None):
     """``U`` with its column ``j`` delayed by ``delay[j]`` samples in every sequence.
 
     The samples that the delay brings in before the start of a sequence were
-    not measured: a sequence that repeats with ``period`` (``repeating``, one
-    flag per sequence) takes them from its own periodic continuation, any
-    other takes zero, the mean of a normalised input.
+    not measured: a sequence that repeats with ``period`` (see
+    :func:`periodic_sequences`) takes them from its own periodic continuation,
+    any other takes zero, the mean of a normalised input.
 
     Returns
     -------
@@ -207,10 +207,12 @@ def delayed_input(U, starts, delay, period=None, repeating=None):
     """
     if not np.any(delay):
         return U
+    repeating = (np.zeros(len(starts) - 1, dtype=bool) if period is None
+                 else periodic_sequences(U, starts, period))
     delayed = np.zeros_like(U)
     for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
         for j, lag in enumerate(delay):
             delayed[begin + lag:end, j] = U[begin:end - lag, j]
-            if lag and repeating is not None and repeating[k]:
+            if lag and repeating[k]:
                 delayed[begin:begin + lag, j] = U[begin + np.arange(-lag, 0) % period, j]
     return delayed

@@ -29,8 +29,7 @@ from sklearn.utils.validation import (
 
 from .._core._kernels import DIVERGENCE_BOUND
 from .._core._multistart import fit_initial_state
-from .._core._sequences import (delayed_input, periodic_sequences, sequence_bounds,
-                                transient_mask)
+from .._core._sequences import delayed_input, sequence_bounds, transient_mask
 from .._validation import Integers, binary_magnitude, naming
 from ..exceptions import SimulationDivergedWarning, warn_at_caller
 
@@ -298,11 +297,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         """Normalised inputs ``U`` delayed by ``input_delay_``, a sequence that
         repeats with the estimator's ``period`` continued periodically before
         its start."""
-        if not np.any(self.input_delay_):
-            return U
-        period = getattr(self, "period", None)
-        repeating = None if period is None else periodic_sequences(U, starts, period)
-        return delayed_input(U, starts, self.input_delay_, period, repeating)
+        return delayed_input(U, starts, self.input_delay_, getattr(self, "period", None))
 
     def _scored_rows(self, starts, X):
         """The rows ``score`` compares for the input ``X``: all but the first

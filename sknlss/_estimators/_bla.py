@@ -225,8 +225,6 @@ def _check_dead_time(estimate, U, Y, starts, params, error):
     removed, so each trial costs a parametric fit, not a nonparametric one.
     """
     longest = min(_MAX_CHECKED_DELAY, int(np.min(np.diff(starts))) // 10)
-    period = params["period"]
-    repeating = None if period is None else np.ones(len(starts) - 1, dtype=bool)
     mask = transient_mask(starts, params["n_transient"])
     # The subspace model alone ranks the delays; its refinement would cost
     # more than the rest of the trial.
@@ -237,8 +235,8 @@ def _check_dead_time(estimate, U, Y, starts, params, error):
         warnings.simplefilter("ignore")
         for delay in range(1, longest + 1):
             advance = np.exp(2j * np.pi * estimate.frequencies * delay)[:, None, None]
-            U_delayed = delayed_input(U, starts, np.full(U.shape[1], delay), period,
-                                      repeating)
+            U_delayed = delayed_input(U, starts, np.full(U.shape[1], delay),
+                                      params["period"])
             try:
                 errors[delay] = _parametric(replace(estimate, frf=estimate.frf * advance),
                                             U_delayed, Y, starts, mask,
@@ -495,8 +493,8 @@ class BLAEstimator(_BaseStateSpace):
         of a sequence the delayed input was not measured: a sequence whose
         input repeats with ``period`` is continued periodically, any other
         takes the training input's mean. With the default 0, a model that
-        simulates its data with a normalised RMS error above 0.5 is refitted
-        on delayed inputs, and a delay that halves that error is named in a
+        simulates its data with a normalised RMS error above 0.5 is tried on
+        delayed inputs, and a delay that halves that error is named in a
         warning.
     n_transient : int, default=0
         Samples at the start of each sequence left out: of the least-squares
