@@ -1,10 +1,11 @@
 """Every public docstring documents exactly the parameters of its signature, in
 order, and the Examples of every docstring of the package, private ones
-included, run and print what they show."""
+included, run, print what they show and warn of nothing."""
 
 import doctest
 import importlib
 import inspect
+import warnings
 from pathlib import Path
 
 import pytest
@@ -165,8 +166,12 @@ def test_examples_run(test):
     pytest.importorskip("matplotlib").use("Agg")
     report = []
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    result = runner.run(test, out=report.append)
+    # An example that warns shows users a fit that needs other settings.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = runner.run(test, out=report.append)
     assert result.failed == 0, "".join(report)
+    assert not caught, [f"{w.category.__name__}: {w.message}" for w in caught]
 
 
 def test_api_reference_lists_every_public_name():

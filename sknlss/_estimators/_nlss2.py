@@ -388,13 +388,14 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     >>> import numpy as np
     >>> from sknlss import NLSS2Regressor
     >>> rng = np.random.default_rng(0)
-    >>> u = rng.standard_normal((300, 1))
+    >>> u = rng.standard_normal((500, 1))
     >>> x = np.zeros(2)
-    >>> y = np.empty(300)
-    >>> for t in range(300):
+    >>> y = np.empty(500)
+    >>> for t in range(500):
     ...     y[t] = x[0] + 0.3 * np.tanh(2 * x[0])
     ...     x = np.array([0.7 * x[0] + 0.2 * x[1], -0.2 * x[0] + 0.5 * x[1] + u[t, 0]])
-    >>> model = NLSS2Regressor(n_states=2, max_iter=60, random_state=0).fit(u, y)
+    >>> y += 0.01 * rng.standard_normal(500)
+    >>> model = NLSS2Regressor(n_states=2, random_state=0).fit(u, y)
     >>> model.n_params_
     42
 
