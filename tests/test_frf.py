@@ -1,9 +1,14 @@
 """Nonparametric FRF: robust method and Local Polynomial Method."""
 
+from unittest import mock
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.signal import butter, lfilter, lfiltic
 
+from sknlss._linear import _frf
 from sknlss._linear._frf import lpm_frf, lpm_window, robust_frf
 from sknlss.signals import multisine
 
@@ -180,3 +185,25 @@ def test_lpm_too_short_record_has_no_variance():
     U, Y = rng.standard_normal((10, 3)), rng.standard_normal((10, 1))
     est = lpm_frf(U, Y, np.array([0, 10]))
     assert est.total_variance is None and np.all(np.isfinite(est.frf))
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(12, 3000), n_inputs=st.integers(1, 2), n_outputs=st.integers(1, 2),
+       block=st.integers(1, 40), cut=st.sampled_from([None, 0.05, 0.3]),
+       seed=st.integers(0, 2**16))
+def test_lpm_blocks_of_bins_change_nothing(n, n_inputs, n_outputs, block, cut, seed):
+    """The windows are fitted a block of bins at a time to bound the memory:
+    the estimate is the same, to the bit, whatever the block size."""
+    rng = np.random.default_rng(seed)
+    U = rng.standard_normal((n, n_inputs))
+    Y = lfilter(NUM, DEN, U[:, :1], axis=0) + 0.1 * rng.standard_normal((n, n_outputs))
+    starts = np.array([0, n])
+    whole = lpm_frf(U, Y, starts, max_frequency=cut)
+    with mock.patch.object(_frf, "_LPM_BLOCK", block):
+        blocks = lpm_frf(U, Y, starts, max_frequency=cut)
+    np.testing.assert_array_equal(blocks.frequencies, whole.frequencies)
+    np.testing.assert_array_equal(blocks.frf, whole.frf)
+    if whole.total_variance is None:
+        assert blocks.total_variance is None
+    else:
+        np.testing.assert_array_equal(blocks.total_variance, whole.total_variance)

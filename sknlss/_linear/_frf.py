@@ -35,6 +35,8 @@ LPM_POWER_THRESHOLD = 1e-3
 # discarded, so that a window without input power gives a finite, uninformative
 # estimate (with a large variance) rather than a division by zero.
 _LPM_RCOND = 1e-10
+# Bins whose LPM windows are fitted at once (see ``_lpm_record``).
+_LPM_BLOCK = 4096
 # Condition number of an input block of the robust method above which its
 # inputs are taken as collinear (their FRFs cannot be told apart).
 _COLLINEAR_CONDITION = 1e12
@@ -227,24 +229,22 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
     return n_bins, 0
 
 
-def _lpm_record(U, Y, order, bandwidth, max_frequency):
-    """LPM on one record, on its bins below ``max_frequency``: (frequencies,
-    FRF, variance or None, input power of each bin's window)."""
-    n, n_u = U.shape
-    n_bins = (n - 1) // 2  # positive bins below Nyquist
-    width, order = lpm_window(n_u, order, n_bins, bandwidth)
-    Uf = np.fft.fft(U, axis=0)[1 : n_bins + 1] / np.sqrt(n)
-    Yf = np.fft.fft(Y, axis=0)[1 : n_bins + 1] / np.sqrt(n)
+def _lpm_windows(Uf, Yf, centres, width, order):
+    """LPM fits of the windows centred on the bins ``centres`` (0-based in
+    ``Uf`` and ``Yf``): FRF, noise variance of the outputs, the variance gain
+    of each FRF unknown, degrees of freedom, rank and input power of each
+    window."""
+    n_bins, n_u = Uf.shape
     half = width // 2
     # window of bin k: the `width` bins closest to it that lie in 1..n_bins
-    first = np.clip(np.arange(n_bins) - half, 0, n_bins - width)
+    first = np.clip(centres - half, 0, n_bins - width)
     index = first[:, None] + np.arange(width)
-    offset = (index - np.arange(n_bins)[:, None]) / max(half, 1)
+    offset = (index - centres[:, None]) / max(half, 1)
     powers = offset[..., None] ** np.arange(order + 1)  # (bin, width, order+1)
     Uw = Uf[index]  # (bin, width, n_u)
     # regressors: [r^s u_i] for every s and i, then [r^s] for the transient
     K = np.concatenate(
-        [(powers[..., :, None] * Uw[..., None, :]).reshape(n_bins, width, -1),
+        [(powers[..., :, None] * Uw[..., None, :]).reshape(centres.size, width, -1),
          powers.astype(complex)],
         axis=2,
     )
@@ -262,30 +262,50 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     # diag of (K^H K)^+ for the FRF unknowns
     gain = np.sum(np.abs(np.conj(Vh[:, :, :n_u])) ** 2 * inv_s[..., None] ** 2, axis=1)
     G = coef[:, :n_u, :].transpose(0, 2, 1)  # (bin, n_y, n_u)
-    var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
     window_power = np.sum(np.abs(Uw) ** 2, axis=(1, 2))
+    return G, noise_var, gain, dof, rank < min(K.shape[1:]), window_power
+
+
+def _lpm_record(U, Y, order, bandwidth, max_frequency):
+    """LPM on one record, on its bins below ``max_frequency``: (frequencies,
+    FRF, variance or None, input power of each bin's window)."""
+    n, n_u = U.shape
+    n_bins = (n - 1) // 2  # positive bins below Nyquist
+    width, order = lpm_window(n_u, order, n_bins, bandwidth)
+    Uf = np.fft.fft(U, axis=0)[1 : n_bins + 1] / np.sqrt(n)
+    Yf = np.fft.fft(Y, axis=0)[1 : n_bins + 1] / np.sqrt(n)
+    bins = np.arange(1, n_bins + 1)
+    centres = np.flatnonzero(_band_mask(bins, n, max_frequency))
+    if centres.size == 0:
+        empty = np.empty((0, Y.shape[1], n_u), dtype=complex)
+        return np.empty(0), empty, np.empty(empty.shape), np.empty(0)
+    # The windows' regressors, factors and residuals take about 2 kB per
+    # bin; fitted a block of bins at a time, the memory stays that of the
+    # record's DFT however long the record.
+    fits = [_lpm_windows(Uf, Yf, block, width, order)
+            for block in np.array_split(centres, max(1, -(-centres.size // _LPM_BLOCK)))]
+    G, noise_var, gain, dof, deficient, window_power = (
+        np.concatenate([fit[k] for fit in fits]) for k in range(6))
+    var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
     # A bin without input power of its own (an unexcited line of a periodic
     # input, whose window still holds excited ones) has no FRF to estimate:
     # its estimate would be extrapolated from the neighbours, with a variance
     # that does not show it. It counts as not excited.
     bin_power = np.sum(np.abs(Uf) ** 2, axis=1)
-    window_power[bin_power <= EXCITATION_THRESHOLD * bin_power.max(initial=0.0)] = 0.0
+    window_power[bin_power[centres] <= EXCITATION_THRESHOLD * bin_power.max(initial=0.0)] = 0.0
     if n_u > 1:
         # Where the inputs are collinear over a window, the FRFs of the
         # inputs cannot be told apart: the bin counts as not excited. (A
         # window narrower than its unknowns, on a very short record, is
         # underdetermined whatever the inputs.)
-        window_power[rank < min(K.shape[1:])] = 0.0
+        window_power[deficient] = 0.0
         if not np.any(window_power):
             raise ValueError(
                 "The inputs of X are collinear in every window of the Local "
                 "Polynomial Method: it cannot separate them. Each input needs its "
                 "own, independent excitation."
             )
-    bins = np.arange(1, n_bins + 1)
-    keep = _band_mask(bins, n, max_frequency)
-    return (bins[keep] / n, G[keep], None if var is None else var[keep],
-            window_power[keep])
+    return bins[centres] / n, G, var, window_power
 
 
 def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
