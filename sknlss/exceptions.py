@@ -33,16 +33,18 @@ class DataWarning(UserWarning):
 
 
 class LinearFallbackWarning(UserWarning):
-    """Warning raised when a record cannot identify the nonlinear terms.
+    """Warning raised when the linear model is kept for a reason other than the data.
 
-    The cost of the fit holds fewer values than the model has parameters: the
-    estimator keeps its linear model (the nonlinear terms are zero, the linear
-    part is refined on the simulation error unless that would make a stable
-    linear part unstable) and sets
-    ``fell_back_to_linear_``. A nonlinear model that the record can identify
-    but that does not beat its linear start on the held-out data is not
-    returned either; that is recorded in ``fell_back_to_linear_`` without a
-    warning, as a result of the selection.
+    Either the cost of the fit holds fewer values than the model has
+    parameters: the estimator keeps its linear model (the nonlinear terms are
+    zero, the linear part is refined on the simulation error unless that would
+    make a stable linear part unstable). Or every start that beat the linear
+    model on the held-out data ran away on the estimation input enlarged by a
+    fifth, and the boundedness guard excluded it (``start_status_`` says
+    ``"unbounded"``). Both set ``fell_back_to_linear_``. A nonlinear model
+    that does not beat its linear start on the held-out data is not returned
+    either; that is recorded in ``fell_back_to_linear_`` without a warning,
+    as a result of the selection.
     """
 
 

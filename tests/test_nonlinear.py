@@ -1,6 +1,7 @@
 """Behaviour shared by the nonlinear estimators: every option of the shared
 simulation-error core, for every estimator; the linear model they start from."""
 
+import re
 import warnings
 
 import numpy as np
@@ -380,6 +381,53 @@ def test_fallback_to_the_linear_model_is_reported(record):
     assert np.all(model.E_ == 0) and np.all(model.F_ == 0)
     fitted = PNLSSRegressor(2, max_iter=20, validation_fraction=0.3).fit(u, y)
     assert not fitted.fell_back_to_linear_
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_start_status_says_why_each_start_is_out(name, record):
+    u, y = record
+    model = FACTORIES[name](n_states=2, n_init=3).set_params(random_state=0).fit(u, y)
+    assert model.start_status_.shape == (3,)
+    assert set(model.start_status_) <= {"kept", "beaten", "unbounded", "escapes", "failed"}
+    assert list(model.start_status_).count("kept") == (0 if model.fell_back_to_linear_ else 1)
+    kept = model.start_status_ == "kept"
+    assert np.all(model.start_losses_[kept] == model.start_losses_.min())
+    out = np.isin(model.start_status_, ["unbounded", "escapes", "failed"])
+    assert np.all(np.isinf(model.start_losses_[out]))
+
+
+def test_verbose_sums_up_every_start_in_the_calling_process(record, capsys):
+    # The iteration lines of a start are printed where it runs (a joblib
+    # worker with n_jobs); the summary of every start and of the choice is
+    # printed by the process that called fit.
+    u, y = record
+    model = FACTORIES["NL-LFR"](n_states=2, n_init=2, verbose=1).fit(u, y)
+    lines = capsys.readouterr().out.splitlines()
+    for i, state in enumerate(model.start_status_):
+        summary = [line for line in lines if line.startswith(f"NL-LFR start {i}: ")]
+        assert len(summary) == 1 and summary[0].endswith(str(state))
+        if state == "kept":
+            assert f": {model.n_iter_} iterations in " in summary[0]
+    kept = int(np.flatnonzero(model.start_status_ == "kept")[0])
+    assert lines[-1].startswith(f"NL-LFR: start {kept} kept (held-out loss")
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_a_fallback_made_by_the_boundedness_guard_warns(name, record, monkeypatch):
+    # Every start that beats the linear model is then excluded by the guard,
+    # not by the data: a result the user must hear about.
+    u, y = record
+    monkeypatch.setattr("sknlss._estimators._nonlinear.stays_bounded",
+                        lambda problem, theta: False)
+    with pytest.warns(LinearFallbackWarning, match="enlarged by 20%") as caught:
+        model = FACTORIES[name](n_states=2, n_init=2).set_params(random_state=0).fit(u, y)
+    # (The decoupled model's PNLSS model, whose guard excluded its starts too,
+    # says it.)
+    assert any(re.search(r"\d of \d starts beat the linear model", str(w.message))
+               for w in caught)
+    assert model.fell_back_to_linear_
+    np.testing.assert_array_equal(model.start_status_, ["unbounded", "unbounded"])
+    np.testing.assert_array_equal(model.predict(u), model.bla_.predict(u))
 
 
 @pytest.mark.parametrize("name", FACTORIES)

@@ -220,7 +220,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         of the linear model's slowest pole (to 1 %, at most a tenth of the
         shortest sequence).
     verbose : int, default=0
-        Print the progress of the optimisation.
+        Print the progress of the optimisation when positive: every iteration
+        of every start (where the start runs, a joblib worker with
+        ``n_jobs``), then, from the calling process, each start's iterations,
+        time, held-out loss and ``start_status_``, and the choice.
 
     Attributes
     ----------
@@ -277,9 +280,17 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         sequences that all starts held out (``inf`` for a start that failed,
         that ran away on the enlarged estimation input or that fits its own
         rows worse than the linear model).
+    start_status_ : ndarray of str of shape (n_init,)
+        What became of every start: ``"kept"``; ``"beaten"`` (by another start
+        or the linear model on the held-out end, or fits its own rows worse
+        than the linear model); ``"unbounded"`` (ran away on the estimation
+        input enlarged by a fifth); ``"escapes"`` (diverges on the doubled
+        input while a nearly as good start does not); ``"failed"`` (its
+        numerics failed); ``"not run"`` (record too short for the terms).
     fell_back_to_linear_ : bool
         True when no start beat the linear model there, or the record is too
-        short for the nonlinear terms (with a
+        short for the nonlinear terms, or every start that beat it ran away on
+        the enlarged input (both with a
         :class:`~sknlss.LinearFallbackWarning`): the linear model is kept (its
         nonlinear terms are zero).
     linear_loss_ : float

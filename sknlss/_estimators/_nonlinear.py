@@ -24,6 +24,7 @@ starting points
 (``_set_terms`` and ``_terms_values``).
 """
 
+import time
 import warnings
 from abc import abstractmethod
 from numbers import Real
@@ -447,6 +448,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             theta_best, result = self._fit_linear_part(problem, self._linear_model(model, theta))
             # No start could be made: each counts as left out.
             self.start_losses_ = np.full(self.n_init, np.inf)
+            self.start_status_ = np.full(self.n_init, "not run")
             self.linear_loss_ = problem_sets[0][min(shares)].held_out_loss(theta_best)
             self.fell_back_to_linear_ = True
         else:
@@ -543,15 +545,20 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # Every start is judged on the end that all of them held out; a start
         # that blows up on a larger copy of the estimation input is out.
         common = [problems[min(shares)] for problems in problem_sets]
-        losses = [np.inf if isinstance(outcome, Exception)
-                  or not stays_bounded(common[c], outcome[0])
-                  else common[c].held_out_loss(outcome[0])
+        status = ["failed" if isinstance(outcome, Exception)
+                  else "beaten" if stays_bounded(common[c], outcome[0]) else "unbounded"
                   for (c, *_), outcome in zip(runs, outcomes)]
-        losses = _prefer_finite_when_doubled(
+        judged = [common[c].held_out_loss(outcome[0]) if state != "failed" else np.inf
+                  for (c, *_), outcome, state in zip(runs, outcomes, status)]
+        losses = [loss if state == "beaten" else np.inf for loss, state in zip(judged, status)]
+        preferred = _prefer_finite_when_doubled(
             losses, [(common[c], None if isinstance(outcome, Exception) else outcome[0])
                      for (c, *_), outcome in zip(runs, outcomes)])
+        status = ["escapes" if kept != loss else state
+                  for kept, loss, state in zip(preferred, losses, status)]
+        losses = preferred
         best = int(np.argmin(losses))
-        theta_best, result, start_warnings = outcomes[best]
+        theta_best, result, start_warnings, _ = outcomes[best]
         c_best, j_best, _, seed_best = runs[best]
         self.start_losses_ = np.asarray(losses)
         linear_loss = common[0].held_out_loss(linear_theta)
@@ -559,18 +566,53 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # returned: the linear model is, and the attribute records it.
         self.linear_loss_ = linear_loss
         self.fell_back_to_linear_ = not losses[best] < linear_loss
+        if not self.fell_back_to_linear_:
+            status[best] = "kept"
+        self.start_status_ = np.asarray(status)
+        if self.verbose:
+            # Printed here: the starts' own lines stay in the workers with n_jobs.
+            for i, (outcome, loss, state) in enumerate(zip(outcomes, judged, status)):
+                done = ("failed" if isinstance(outcome, Exception) else
+                        f"{outcome[1].n_iter} iterations in {outcome[3]:.1f} s, held-out "
+                        f"loss {loss:.4g}, {state}")
+                print(f"{self._label} start {i}: {done}", flush=True)
         if self.fell_back_to_linear_:
-            if self.verbose:
-                print(f"{self._label}: no start beat the linear model on the held-out "
-                      f"data ({losses[best]:.3g} against {linear_loss:.3g}); the linear "
-                      "model is kept.")
+            self._report_fallback(losses[best], linear_loss, judged)
             return contexts[0]["model"], linear_theta, result
+        if self.verbose:
+            print(f"{self._label}: start {best} kept (held-out loss {losses[best]:.4g} "
+                  f"against the linear model's {linear_loss:.4g}).", flush=True)
         for message, category in start_warnings:
             warn_at_caller(message, category)
         self._record_start(contexts[c_best], j_best, seed_best)
         if self._refits(shares):
             theta_best = self._refit(problem_sets[c_best][0.0], theta_best)
         return contexts[c_best]["model"], theta_best, result
+
+    def _report_fallback(self, best_loss, linear_loss, judged):
+        """Say why the linear model is kept: no start beat it on the held-out
+        end, or (with a warning) every start that did was excluded by the
+        boundedness guard, a result of the guard rather than of the data."""
+        excluded = [loss for loss, state in zip(judged, self.start_status_)
+                    if state == "unbounded" and loss < linear_loss]
+        beaten = any(state == "beaten" and loss < linear_loss
+                     for loss, state in zip(judged, self.start_status_))
+        if excluded and not beaten:
+            warn_at_caller(
+                f"{self._label}: {len(excluded)} of {len(judged)} starts beat the linear "
+                f"model on the held-out data (best {min(excluded):.3g} against "
+                f"{linear_loss:.3g}), but each diverged or left {_GUARD_RANGE:g} times the "
+                f"output's range on the estimation input enlarged by "
+                f"{_GUARD_GAIN - 1:.0%}; the linear model is kept (start_status_). "
+                "A model that runs away just beyond the estimation amplitude often "
+                "comes from a record too short for the structure, or from a start "
+                "transient left in the cost: set n_transient to the settling time of "
+                "bla_, or estimate_x0=True.",
+                LinearFallbackWarning)
+        elif self.verbose:
+            print(f"{self._label}: no start beat the linear model on the held-out "
+                  f"data ({best_loss:.3g} against {linear_loss:.3g}); the linear "
+                  "model is kept.")
 
     def _refits(self, shares):
         """Whether the kept start is refined on all the rows after the search."""
@@ -638,15 +680,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 def _fit_start(estimator, context, problem, start, seed, label, options):
     """One start: the estimator's candidates, then Levenberg-Marquardt on ``problem``.
 
-    Returns the parameters, the optimiser's result and the warnings the start
-    raised, as ``(message, category)`` pairs: they concern the user only if
-    this start is the one kept.
+    Returns the parameters, the optimiser's result, the warnings the start
+    raised, as ``(message, category)`` pairs (they concern the user only if
+    this start is the one kept), and the seconds it took.
     """
+    began = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         candidates = estimator._starting_points(context, start, seed)
         theta, result = fit_from(problem, candidates, label=label, **options)
-    return theta, result, [(warning.message, warning.category) for warning in caught]
+    return (theta, result, [(warning.message, warning.category) for warning in caught],
+            time.perf_counter() - began)
 
 
 #: How each named extrapolation continues the terms beyond the range of their
