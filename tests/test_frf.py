@@ -188,7 +188,7 @@ def test_lpm_too_short_record_has_no_variance():
 
 
 @settings(max_examples=25, deadline=None)
-@given(n=st.integers(12, 3000), n_inputs=st.integers(1, 2), n_outputs=st.integers(1, 2),
+@given(n=st.integers(100, 3000), n_inputs=st.integers(1, 2), n_outputs=st.integers(1, 2),
        block=st.integers(1, 40), cut=st.sampled_from([None, 0.05, 0.3]),
        seed=st.integers(0, 2**16))
 def test_lpm_blocks_of_bins_change_nothing(n, n_inputs, n_outputs, block, cut, seed):

@@ -368,6 +368,40 @@ def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
     assert cost_transient(estimate_x0=True) == 0
 
 
+def test_each_sequence_skips_the_settling_time_up_to_a_tenth_of_itself():
+    # A short sequence no longer cuts the transient of the long ones: the
+    # 1000-sample record skips the 100 samples a slow mode needs (its tenth),
+    # the 150- and 30-sample records a tenth of theirs.
+    starts = np.array([0, 1000, 1150, 1180])
+    model = PNLSSRegressor(2)
+    model.input_delay_ = np.array([0])
+    model.fit_transient_ = model._cost_transient(np.diag([0.99, 0.0]), starts)
+    assert model.fit_transient_ == 100
+    np.testing.assert_array_equal(model._sequence_transients(starts), [100, 15, 3])
+    model.n_transient = 20
+    np.testing.assert_array_equal(model._sequence_transients(starts), [100, 20, 20])
+    x0_model = PNLSSRegressor(2, estimate_x0=True, n_transient=5)
+    x0_model.fit_transient_ = 5
+    np.testing.assert_array_equal(x0_model._sequence_transients(starts), 5)
+
+
+def test_auto_hold_out_splits_the_sequences_that_can_spare_samples(record):
+    # A sequence shorter than 100 samples is fitted whole; the longer ones
+    # still hold out their ends, which rank the starts.
+    u, y = record
+    starts = np.array([0, 350, 400])
+    model = PNLSSRegressor(2)
+    np.testing.assert_array_equal(model._sequence_fractions(0.3, starts), [0.3, 0.0])
+    assert PNLSSRegressor(2, validation_fraction=0.3)._sequence_fractions(0.3, starts) == 0.3
+    fitted = PNLSSRegressor(2, max_iter=8, n_init=2).fit(
+        u, y, sequence_id=np.repeat([0, 1], [350, 50]))
+    assert fitted.validation_loss_history_ is not None
+    assert np.isfinite(fitted.start_losses_).any()
+    whole = PNLSSRegressor(2, max_iter=8, n_init=2).fit(
+        u[:90], y[:90], sequence_id=np.repeat([0, 1], [45, 45]))
+    assert whole.validation_loss_history_ is None
+
+
 def test_fallback_to_the_linear_model_is_reported(record):
     u, y = record
     # Without iterations the start stays at its starting point, the linear

@@ -57,12 +57,13 @@ def fit_rows(U, Y, starts, *, n_transient, validation_fraction, steady_state_per
         Normalised signals.
     starts : ndarray
         Sequence boundaries.
-    n_transient : int
+    n_transient : int or ndarray of shape (n_sequences,)
         Samples per sequence kept out of the cost. With
-        ``steady_state_period``, the last ``n_transient`` samples of every
-        sequence are prepended to it instead, so that it starts in (nearly)
-        periodic steady state and all its samples enter the cost.
-    validation_fraction : float
+        ``steady_state_period`` (an int then), the last ``n_transient``
+        samples of every sequence are prepended to it instead, so that it
+        starts in (nearly) periodic steady state and all its samples enter the
+        cost.
+    validation_fraction : float or ndarray of shape (n_sequences,)
         Share of the end of every sequence held out.
     steady_state_period : int, default=None
         Period of a periodic excitation (every sequence a whole number of
@@ -72,7 +73,7 @@ def fit_rows(U, Y, starts, *, n_transient, validation_fraction, steady_state_per
     -------
     rows : FitRows
     """
-    periodic = steady_state_period is not None and n_transient > 0
+    periodic = steady_state_period is not None and np.any(np.asarray(n_transient) > 0)
     fit_mask, val_mask = holdout_masks(starts, 0 if periodic else n_transient,
                                        validation_fraction)
     if not periodic:

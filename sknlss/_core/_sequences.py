@@ -78,9 +78,10 @@ def holdout_masks(starts, n_transient, validation_fraction):
     """Rows used for the cost and rows held out for selection.
 
     The last ``validation_fraction`` of every sequence is held out; the first
-    ``n_transient`` samples of every sequence are in neither set. Simulations run
-    over whole sequences, so the held-out tail continues from the state the
-    model reached at the end of the fitted part.
+    ``n_transient`` samples of every sequence are in neither set (each an
+    int, or one per sequence). Simulations run over whole sequences, so the
+    held-out tail continues from the state the model reached at the end of
+    the fitted part.
 
     Returns
     -------
@@ -88,10 +89,13 @@ def holdout_masks(starts, n_transient, validation_fraction):
     """
     fit_mask = transient_mask(starts, n_transient)
     validation_mask = np.zeros_like(fit_mask)
-    if validation_fraction:
-        for begin, end in zip(starts[:-1], starts[1:]):
-            split = end - int(round(validation_fraction * (end - begin)))
-            validation_mask[max(split, begin + n_transient) : end] = True
+    n_sequences = len(starts) - 1
+    for begin, end, n_drop, fraction in zip(
+            starts[:-1], starts[1:], np.broadcast_to(n_transient, (n_sequences,)),
+            np.broadcast_to(validation_fraction, (n_sequences,))):
+        if fraction:
+            split = end - int(round(fraction * (end - begin)))
+            validation_mask[max(split, begin + n_drop) : end] = True
             fit_mask[split:end] = False
     if not fit_mask.any():
         raise ValueError(

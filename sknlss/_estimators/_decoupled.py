@@ -217,8 +217,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         that mode does not decay) leaves the initial state undetermined: the
         search then holds it at the PNLSS model's ``x0_``. Without
         ``estimate_x0`` and ``period``, the cost also skips the settling time
-        of the linear model's slowest pole (to 1 %, at most a tenth of the
-        shortest sequence).
+        of the linear model's slowest pole (to 1 %, at most a tenth of
+        each sequence).
     verbose : int, default=0
         Print the progress of the optimisation when positive: every iteration
         of every start (where the start runs, a joblib worker with
@@ -298,7 +298,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     refit_n_iter_ : int
         Iterations of the refit on all the rows that were kept (0 without one).
     fit_transient_ : int
-        Samples per sequence left out of the cost (see ``n_transient``).
+        Samples left out of the cost at the start of every sequence (see
+        ``n_transient``); without ``estimate_x0`` and ``period``, a sequence
+        shorter than ten times the settling time leaves out a tenth of its
+        samples.
     n_features_in_ : int
         Number of inputs seen during ``fit``.
     u_offset_, u_scale_ : ndarray of shape (n_inputs,)

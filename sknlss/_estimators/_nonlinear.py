@@ -58,7 +58,7 @@ _AUTO_SHARES = (0.25, 0.3, 0.35, 0.275, 0.325)
 _MIN_SPLIT_LENGTH = 100
 #: Without an estimated initial state, the cost skips the samples in which the
 #: slowest pole of the linear model decays to this fraction, at most this
-#: share of the shortest sequence.
+#: share of each sequence.
 _SETTLED = 1e-2
 _MAX_TRANSIENT_SHARE = 0.1
 #: Relative margin above the linear start's error on the cost rows within which
@@ -326,26 +326,44 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             return [float(self.validation_fraction)] * self.n_init
         bla = getattr(self, "bla", None)
         periodic = self.period is not None or getattr(bla, "period", None) is not None
-        if periodic or np.min(np.diff(starts)) < _MIN_SPLIT_LENGTH:
-            # Periodic records are fitted in whole periods, and a very short
-            # record has no samples to spare: the starts are ranked on the
+        if periodic or np.max(np.diff(starts)) < _MIN_SPLIT_LENGTH:
+            # Periodic records are fitted in whole periods, and very short
+            # records have no samples to spare: the starts are ranked on the
             # cost (hold out whole periods or realizations by hand, e.g. as a
             # separate record).
             return [0.0] * self.n_init
         return [_AUTO_SHARES[i % len(_AUTO_SHARES)] for i in range(self.n_init)]
 
+    def _sequence_fractions(self, share, starts):
+        """The held-out share of each sequence for a start's ``share``: with
+        ``validation_fraction="auto"``, a sequence too short to spare samples
+        is fitted whole, and the others are split."""
+        if self.validation_fraction != "auto":
+            return share
+        return np.where(np.diff(starts) < _MIN_SPLIT_LENGTH, 0.0, share)
+
     def _cost_transient(self, A, starts):
-        """Samples per sequence left out of the cost: ``n_transient``, and without
-        an estimated initial state, at least the settling time of the linear
-        model's slowest pole (a record rarely starts at rest) after the
-        largest input delay (whose unmeasured samples start it too)."""
+        """Samples left out of the cost at the start of the longest sequence:
+        ``n_transient``, and without an estimated initial state, at least the
+        settling time of the linear model's slowest pole (a record rarely
+        starts at rest) after the largest input delay (whose unmeasured
+        samples start it too)."""
         if self.estimate_x0 or self.period is not None:
             return self.n_transient
         # A mode that does not decay never settles (the decoupled model starts
         # from a PNLSS model's linear part, which may grow).
-        limit = int(_MAX_TRANSIENT_SHARE * np.min(np.diff(starts)))
+        limit = int(_MAX_TRANSIENT_SHARE * np.max(np.diff(starts)))
         settled = _settling_time(A) + int(np.max(self.input_delay_, initial=0))
         return max(self.n_transient, min(settled, limit))
+
+    def _sequence_transients(self, starts):
+        """Samples left out of the cost at the start of each sequence:
+        ``fit_transient_``, at most a tenth of each sequence where it comes
+        from the settling time (``n_transient`` is the user's)."""
+        if self.estimate_x0 or self.period is not None:
+            return self.fit_transient_
+        limits = (_MAX_TRANSIENT_SHARE * np.diff(starts)).astype(int)
+        return np.maximum(self.n_transient, np.minimum(self.fit_transient_, limits))
 
     def _structure(self):
         """The structure parameters and their values, for messages."""
@@ -372,7 +390,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             output_offset=self._terms_output_constant is None))
         # The largest Jacobian: the smallest hold-out and the shortest transient.
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
-                                 validation_fraction=min(self._row_shares(shares)),
+                                 validation_fraction=self._sequence_fractions(
+                                     min(self._row_shares(shares)), starts),
                                  steady_state_period=self.period).fit_rows.sum())
         # The stability penalty has a row per fitted sample at most, the weight
         # decay one per term parameter.
@@ -412,7 +431,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             return
         share = max(shares)
         try:
-            holdout_masks(starts, self.n_transient, share)
+            holdout_masks(starts, self.n_transient, self._sequence_fractions(share, starts))
         except ValueError:
             ends = (f" before the held-out end of each sequence (validation_fraction="
                     f"{self.validation_fraction!r} holds out its last {share:.0%})"
@@ -429,11 +448,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self._check_model_size(U, Y, starts, shares)
         check_excitation(U, starts, self.n_states, Y.shape[1])
         bla_rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
-                            validation_fraction=max(shares), steady_state_period=self.period)
+                            validation_fraction=self._sequence_fractions(max(shares), starts),
+                            steady_state_period=self.period)
         linear = self._linear_start(U, Y, starts, bla_rows.fit_rows[bla_rows.original])
         self.fit_transient_ = self._cost_transient(linear["A"], starts)
-        rows = {share: fit_rows(U, Y, starts, n_transient=self.fit_transient_,
-                                validation_fraction=share, steady_state_period=self.period)
+        rows = {share: fit_rows(U, Y, starts, n_transient=self._sequence_transients(starts),
+                                validation_fraction=self._sequence_fractions(share, starts),
+                                steady_state_period=self.period)
                 for share in self._row_shares(shares)}
         x0_held = self._holds_x0(linear["A"])
         problem_sets = [{share: self._problem(terms, rows[share], x0_held) for share in rows}
@@ -479,7 +500,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         x0 = np.tile(self.x0_, (len(starts) - 1, 1))
         Y_model, _, diverged = self._simulate_normalized(U, starts, x0, steady_state=True)
         # Periodic records are simulated in steady state: all their rows count.
-        rows = transient_mask(starts, 0 if self.period is not None else self.fit_transient_)
+        rows = transient_mask(starts, 0 if self.period is not None
+                              else self._sequence_transients(starts))
         if not rows.any():
             return
         error = np.inf if diverged else float(np.max(
