@@ -187,23 +187,60 @@ def test_lpm_too_short_record_has_no_variance():
     assert est.total_variance is None and np.all(np.isfinite(est.frf))
 
 
-@settings(max_examples=25, deadline=None)
-@given(n=st.integers(100, 3000), n_inputs=st.integers(1, 2), n_outputs=st.integers(1, 2),
-       block=st.integers(1, 40), cut=st.sampled_from([None, 0.05, 0.3]),
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(3, 3000), n_inputs=st.integers(1, 2), n_outputs=st.integers(1, 2),
+       block=st.integers(1, 40), cut=st.sampled_from([None, 0.001, 0.05, 0.3]),
        seed=st.integers(0, 2**16))
 def test_lpm_blocks_of_bins_change_nothing(n, n_inputs, n_outputs, block, cut, seed):
     """The windows are fitted a block of bins at a time to bound the memory:
-    the estimate is the same, to the bit, whatever the block size."""
+    the estimate (or the error) is the same, to the bit, whatever the block size."""
     rng = np.random.default_rng(seed)
     U = rng.standard_normal((n, n_inputs))
     Y = lfilter(NUM, DEN, U[:, :1], axis=0) + 0.1 * rng.standard_normal((n, n_outputs))
     starts = np.array([0, n])
-    whole = lpm_frf(U, Y, starts, max_frequency=cut)
+
+    def estimate():
+        try:
+            return lpm_frf(U, Y, starts, max_frequency=cut)
+        except ValueError as error:
+            return str(error)
+
+    whole = estimate()
     with mock.patch.object(_frf, "_LPM_BLOCK", block):
-        blocks = lpm_frf(U, Y, starts, max_frequency=cut)
+        blocks = estimate()
+    if isinstance(whole, str):
+        assert blocks == whole
+        return
     np.testing.assert_array_equal(blocks.frequencies, whole.frequencies)
     np.testing.assert_array_equal(blocks.frf, whole.frf)
     if whole.total_variance is None:
         assert blocks.total_variance is None
     else:
         np.testing.assert_array_equal(blocks.total_variance, whole.total_variance)
+
+
+def test_lpm_record_with_collinear_inputs_gives_no_bins():
+    # Its windows cannot separate the inputs: the other record alone makes the
+    # estimate; when every record is so, the error says why.
+    rng = np.random.default_rng(0)
+    U = rng.standard_normal((1024, 2))
+    U[512:, 1] = 2.0 * U[512:, 0]
+    Y = lfilter(NUM, DEN, U.sum(axis=1))[:, None]
+    both = lpm_frf(U, Y, np.array([0, 512, 1024]))
+    first = lpm_frf(U[:512], Y[:512], np.array([0, 512]))
+    np.testing.assert_array_equal(both.frequencies, first.frequencies)
+    np.testing.assert_array_equal(both.frf, first.frf)
+    with pytest.raises(ValueError, match="collinear in every window"):
+        lpm_frf(U[512:], Y[512:], np.array([0, 512]))
+
+
+def test_lpm_record_without_bins_in_the_band_keeps_its_variance_status():
+    # A record with no bin below max_frequency still says whether its windows
+    # would have had a variance, so that records are sorted as before.
+    rng = np.random.default_rng(0)
+    U, Y = rng.standard_normal((40, 1)), rng.standard_normal((40, 1))
+    (_, G, var, _), _ = _frf._lpm_record(U, Y, 2, None, 0.001)
+    assert G.shape == (0, 1, 1) and var is not None and var.shape == (0, 1, 1)
+    U2 = rng.standard_normal((7, 2))
+    (_, _, var, _), _ = _frf._lpm_record(U2, Y[:7], 2, None, 0.001)
+    assert var is None  # three bins for three unknowns: no degree of freedom

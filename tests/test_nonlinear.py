@@ -435,7 +435,7 @@ def test_verbose_sums_up_every_start_in_the_calling_process(record, capsys):
     # worker with n_jobs); the summary of every start and of the choice is
     # printed by the process that called fit.
     u, y = record
-    model = FACTORIES["NL-LFR"](n_states=2, n_init=2, verbose=1).fit(u, y)
+    model = FACTORIES["NL-LFR"](n_states=2, n_init=2, n_jobs=2, verbose=1).fit(u, y)
     lines = capsys.readouterr().out.splitlines()
     for i, state in enumerate(model.start_status_):
         summary = [line for line in lines if line.startswith(f"NL-LFR start {i}: ")]
@@ -462,6 +462,18 @@ def test_a_fallback_made_by_the_boundedness_guard_warns(name, record, monkeypatc
     assert model.fell_back_to_linear_
     np.testing.assert_array_equal(model.start_status_, ["unbounded", "unbounded"])
     np.testing.assert_array_equal(model.predict(u), model.bla_.predict(u))
+
+
+def test_a_fallback_made_by_the_doubled_input_check_warns(record, monkeypatch):
+    # The starts that beat the linear model are dropped for escaping on the
+    # doubled input: again the check's verdict, said as such.
+    u, y = record
+    monkeypatch.setattr("sknlss._estimators._nonlinear._prefer_finite_when_doubled",
+                        lambda losses, starts: [np.inf] * len(losses))
+    with pytest.warns(LinearFallbackWarning, match="diverged on the input doubled"):
+        model = PNLSSRegressor(2, max_iter=8, n_init=2).fit(u, y)
+    assert model.fell_back_to_linear_
+    assert "escapes" in model.start_status_
 
 
 @pytest.mark.parametrize("name", FACTORIES)

@@ -929,8 +929,8 @@ def test_a_transient_that_leaves_nothing_to_fit(Estimator, validation_fraction, 
     # The message names the estimator and the parameters as the user set them.
     expected = rf"{Estimator.__name__}: n_transient=120 leaves no sample to fit"
     if held_out is not None:
-        expected += (rf" before the held-out end of each sequence \(validation_fraction="
-                     rf"'auto' holds out its last {held_out}\)")
+        expected += (rf" before the held-out end of each sequence of 100 samples or more "
+                     rf"\(validation_fraction='auto' holds out its last {held_out}\)")
     with pytest.raises(ValueError, match=expected + "; the longest sequence has 120"):
         Estimator(n_states=2, n_transient=120,
                   validation_fraction=validation_fraction).fit(X, y[:, 0])

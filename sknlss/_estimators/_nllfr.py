@@ -466,9 +466,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         Iteration whose parameters were kept.
     start_losses_ : ndarray of shape (n_init,)
         Mean squared simulation error of every start on the end of the
-        sequences that all starts held out (``inf`` for a start that failed,
-        that ran away on the enlarged estimation input or that fits its own
-        rows worse than the linear model).
+        sequences that all starts held out (``inf`` for every start whose
+        ``start_status_`` is neither ``"kept"`` nor ``"beaten"``, and for a
+        beaten one that fits its own rows worse than the linear model).
     start_status_ : ndarray of str of shape (n_init,)
         What became of every start: ``"kept"``; ``"beaten"`` (by another start
         or the linear model on the held-out end, or fits its own rows worse
@@ -487,10 +487,12 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     refit_n_iter_ : int
         Iterations of the refit on all the rows that were kept (0 without one).
     fit_transient_ : int
-        Samples left out of the cost at the start of every sequence (see
-        ``n_transient``); without ``estimate_x0`` and ``period``, a sequence
-        shorter than ten times the settling time leaves out a tenth of its
-        samples.
+        Samples left out of the cost at the start of the longest sequences
+        (see ``n_transient``): without ``estimate_x0`` and ``period``, the
+        larger of ``n_transient`` and the linear model's settling time plus
+        the largest ``input_delay``, this at most a tenth of the sequence.
+        Every other sequence leaves out ``max(n_transient, min(fit_transient_,
+        a tenth of its length))``.
     n_features_in_ : int
         Number of inputs.
     u_offset_, u_scale_, y_offset_, y_scale_ : ndarray

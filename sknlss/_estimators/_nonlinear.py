@@ -433,7 +433,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         try:
             holdout_masks(starts, self.n_transient, self._sequence_fractions(share, starts))
         except ValueError:
-            ends = (f" before the held-out end of each sequence (validation_fraction="
+            split = (f" of {_MIN_SPLIT_LENGTH} samples or more"
+                     if self.validation_fraction == "auto" else "")
+            ends = (f" before the held-out end of each sequence{split} (validation_fraction="
                     f"{self.validation_fraction!r} holds out its last {share:.0%})"
                     if share else "")
             raise ValueError(
@@ -594,12 +596,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if self.verbose:
             # Printed here: the starts' own lines stay in the workers with n_jobs.
             for i, (outcome, loss, state) in enumerate(zip(outcomes, judged, status)):
-                done = ("failed" if isinstance(outcome, Exception) else
+                done = (f"failed ({outcome})" if isinstance(outcome, Exception) else
                         f"{outcome[1].n_iter} iterations in {outcome[3]:.1f} s, held-out "
                         f"loss {loss:.4g}, {state}")
                 print(f"{self._label} start {i}: {done}", flush=True)
         if self.fell_back_to_linear_:
-            self._report_fallback(losses[best], linear_loss, judged)
+            self._report_fallback(losses[best], linear_loss, judged,
+                                  common[0].val_rows.any())
             return contexts[0]["model"], linear_theta, result
         if self.verbose:
             print(f"{self._label}: start {best} kept (held-out loss {losses[best]:.4g} "
@@ -611,30 +614,40 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             theta_best = self._refit(problem_sets[c_best][0.0], theta_best)
         return contexts[c_best]["model"], theta_best, result
 
-    def _report_fallback(self, best_loss, linear_loss, judged):
+    def _report_fallback(self, best_loss, linear_loss, judged, held_out):
         """Say why the linear model is kept: no start beat it on the held-out
-        end, or (with a warning) every start that did was excluded by the
-        boundedness guard, a result of the guard rather than of the data."""
-        excluded = [loss for loss, state in zip(judged, self.start_status_)
-                    if state == "unbounded" and loss < linear_loss]
-        beaten = any(state == "beaten" and loss < linear_loss
-                     for loss, state in zip(judged, self.start_status_))
-        if excluded and not beaten:
-            warn_at_caller(
-                f"{self._label}: {len(excluded)} of {len(judged)} starts beat the linear "
-                f"model on the held-out data (best {min(excluded):.3g} against "
-                f"{linear_loss:.3g}), but each diverged or left {_GUARD_RANGE:g} times the "
-                f"output's range on the estimation input enlarged by "
-                f"{_GUARD_GAIN - 1:.0%}; the linear model is kept (start_status_). "
-                "A model that runs away just beyond the estimation amplitude often "
-                "comes from a record too short for the structure, or from a start "
-                "transient left in the cost: set n_transient to the settling time of "
-                "bla_, or estimate_x0=True.",
-                LinearFallbackWarning)
-        elif self.verbose:
-            print(f"{self._label}: no start beat the linear model on the held-out "
-                  f"data ({best_loss:.3g} against {linear_loss:.3g}); the linear "
-                  "model is kept.")
+        rows (``held_out``, else the cost rows), or, with a warning, every
+        start that did was excluded by a boundedness check, a verdict of the
+        check rather than of the data."""
+        where = "on the held-out data" if held_out else "on the cost rows"
+        excluded = {state: [loss for loss, status in zip(judged, self.start_status_)
+                            if status == state and loss < linear_loss]
+                    for state in ("unbounded", "escapes")}
+        n_excluded = sum(map(len, excluded.values()))
+        if not n_excluded:
+            if self.verbose:
+                print(f"{self._label}: no start beat the linear model {where} "
+                      f"({best_loss:.4g} against {linear_loss:.4g}); the linear model "
+                      "is kept.", flush=True)
+            return
+        reasons = []
+        if excluded["unbounded"]:
+            reasons.append(f"{len(excluded['unbounded'])} ran away on the estimation input "
+                           f"enlarged by {_GUARD_GAIN - 1:.0%} (diverged or left "
+                           f"{_GUARD_RANGE:g} times the output's range)")
+        if excluded["escapes"]:
+            reasons.append(f"{len(excluded['escapes'])} diverged on the input doubled, "
+                           "where a start that stays finite was nearly as good")
+        best = min(min(losses) for losses in excluded.values() if losses)
+        warn_at_caller(
+            f"{type(self).__name__}({self._structure()}): {n_excluded} of {len(judged)} "
+            f"starts beat the linear model {where} (best {best:.4g} against "
+            f"{linear_loss:.4g}), but {' and '.join(reasons)}; the linear model is kept "
+            "(see its start_status_). A model that runs away just beyond the estimation "
+            "amplitude often comes from a record too short for the structure, or from a "
+            "start transient left in the cost: set n_transient to the settling time of "
+            "bla_, or estimate_x0=True.",
+            LinearFallbackWarning)
 
     def _refits(self, shares):
         """Whether the kept start is refined on all the rows after the search."""

@@ -232,8 +232,8 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
 def _lpm_windows(Uf, Yf, centres, width, order):
     """LPM fits of the windows centred on the bins ``centres`` (0-based in
     ``Uf`` and ``Yf``): FRF, noise variance of the outputs, the variance gain
-    of each FRF unknown, degrees of freedom, rank and input power of each
-    window."""
+    of each FRF unknown, degrees of freedom, whether the regressors are rank
+    deficient, and the input power of each window."""
     n_bins, n_u = Uf.shape
     half = width // 2
     # window of bin k: the `width` bins closest to it that lie in 1..n_bins
@@ -268,7 +268,8 @@ def _lpm_windows(Uf, Yf, centres, width, order):
 
 def _lpm_record(U, Y, order, bandwidth, max_frequency):
     """LPM on one record, on its bins below ``max_frequency``: (frequencies,
-    FRF, variance or None, input power of each bin's window)."""
+    FRF, variance or None, input power of each bin's window), and whether its
+    inputs are collinear in every window (which then has no power)."""
     n, n_u = U.shape
     n_bins = (n - 1) // 2  # positive bins below Nyquist
     width, order = lpm_window(n_u, order, n_bins, bandwidth)
@@ -277,8 +278,11 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     bins = np.arange(1, n_bins + 1)
     centres = np.flatnonzero(_band_mask(bins, n, max_frequency))
     if centres.size == 0:
+        # A window with more bins than unknowns has a variance estimate, as
+        # the bins out of the band would have had.
         empty = np.empty((0, Y.shape[1], n_u), dtype=complex)
-        return np.empty(0), empty, np.empty(empty.shape), np.empty(0)
+        variance = np.empty(empty.shape) if width > (order + 1) * (n_u + 1) else None
+        return (np.empty(0), empty, variance, np.empty(0)), False
     # The windows' regressors, factors and residuals take about 2 kB per
     # bin; fitted a block of bins at a time, the memory stays that of the
     # record's DFT however long the record.
@@ -299,13 +303,7 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
         # window narrower than its unknowns, on a very short record, is
         # underdetermined whatever the inputs.)
         window_power[deficient] = 0.0
-        if not np.any(window_power):
-            raise ValueError(
-                "The inputs of X are collinear in every window of the Local "
-                "Polynomial Method: it cannot separate them. Each input needs its "
-                "own, independent excitation."
-            )
-    return bins[centres] / n, G, var, window_power
+    return (bins[centres] / n, G, var, window_power), n_u > 1 and not np.any(window_power)
 
 
 def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
@@ -320,11 +318,19 @@ def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_fre
         Per sequence: frequencies, FRF, variance (or None) and the input
         power of each bin's window.
     """
-    return [
+    records, collinear = zip(*(
         _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
                     bandwidth, max_frequency)
         for begin, end in zip(starts[:-1], starts[1:])
-    ]
+    ))
+    # A record whose inputs are collinear has no bin to give; the others may.
+    if all(collinear):
+        raise ValueError(
+            "The inputs of X are collinear in every window of the Local Polynomial "
+            "Method: it cannot separate them. Each input needs its own, independent "
+            "excitation."
+        )
+    return list(records)
 
 
 def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
