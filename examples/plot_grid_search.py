@@ -35,8 +35,8 @@ import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, TimeSeriesSplit
 
-from sknlss import (ChebyshevBasis, LegendreBasis, NLLFRRegressor, NLSS2Regressor,
-                    PolynomialBasis)
+from sknlss import (ChebyshevBasis, LegendreBasis, LinearFallbackWarning, NLLFRRegressor,
+                    NLSS2Regressor, PolynomialBasis)
 from sknlss.benchmarks import load_benchmark
 from sknlss.metrics import make_transient_scorer, rms_error
 from sknlss.model_selection import HoldoutSearch
@@ -68,14 +68,17 @@ def run_search(estimator, param_grid):
     with warnings.catch_warnings(record=True) as caught:
         # Counted rather than printed one by one.
         warnings.simplefilter("always", ConvergenceWarning)
+        warnings.simplefilter("always", LinearFallbackWarning)
         search.fit(data.X_est, data.y_est)
     stopped = [w for w in caught if issubclass(w.category, ConvergenceWarning)]
+    linear = [w for w in caught if issubclass(w.category, LinearFallbackWarning)]
     for other in caught:
-        if other not in stopped:
+        if other not in stopped and other not in linear:
             warnings.warn(other.message, other.category)
     print(f"{type(estimator).__name__}: grid search on the estimation record in "
           f"{time.perf_counter() - start:.1f} s; {len(stopped)} fit(s) stopped at "
-          "max_iter while still improving")
+          f"max_iter while still improving, {len(linear)} kept their linear model "
+          "because every start that beat it ran away beyond the estimation amplitude")
     for params, score in zip(search.cv_results_["params"],
                              search.cv_results_["mean_test_score"]):
         # A simulation that diverges on a validation block scores -inf.
@@ -136,9 +139,17 @@ search = HoldoutSearch(
     param_grid={"basis": list(bases.values()), "n_branches": [1, 2]},
 )
 start = time.perf_counter()
-search.fit(data.X_est, data.y_est)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always", LinearFallbackWarning)
+    search.fit(data.X_est, data.y_est)
+linear = [w for w in caught if issubclass(w.category, LinearFallbackWarning)]
+for other in caught:
+    if other not in linear:
+        warnings.warn(other.message, other.category)
 print(f"HoldoutSearch on the estimation record in {time.perf_counter() - start:.1f} s; "
-      f"ranked on its last {search.holdout_fraction_:.0%}")
+      f"ranked on its last {search.holdout_fraction_:.0%}; {len(linear)} candidate fit(s) "
+      "kept their linear model because every start that beat it ran away beyond the "
+      "estimation amplitude")
 names = {basis: name for name, basis in bases.items()}
 for params, rms in zip(search.results_["params"], search.results_["holdout_rms"]):
     print(f"  {names[params['basis']]:9s} {params['n_branches']} branch(es), held out "
