@@ -61,23 +61,28 @@ def show(rms):
     return f"{rms:.4f} V" if np.isfinite(rms) else "diverged"
 
 
+def fit_counting(search, *categories):
+    """Fit ``search`` on the estimation record and count the warnings of
+    ``categories`` its fits raise, rather than print them one by one (the
+    others are raised again)."""
+    with warnings.catch_warnings(record=True) as caught:
+        for category in categories:
+            warnings.simplefilter("always", category)
+        search.fit(data.X_est, data.y_est)
+    for other in caught:
+        if not issubclass(other.category, categories):
+            warnings.warn(other.message, other.category)
+    return [sum(issubclass(w.category, category) for w in caught) for category in categories]
+
+
 def run_search(estimator, param_grid):
     """Search on the estimation record, then evaluate the refitted model once."""
     search = GridSearchCV(estimator, param_grid, cv=cv, scoring=scoring)
     start = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        # Counted rather than printed one by one.
-        warnings.simplefilter("always", ConvergenceWarning)
-        warnings.simplefilter("always", LinearFallbackWarning)
-        search.fit(data.X_est, data.y_est)
-    stopped = [w for w in caught if issubclass(w.category, ConvergenceWarning)]
-    linear = [w for w in caught if issubclass(w.category, LinearFallbackWarning)]
-    for other in caught:
-        if other not in stopped and other not in linear:
-            warnings.warn(other.message, other.category)
+    stopped, linear = fit_counting(search, ConvergenceWarning, LinearFallbackWarning)
     print(f"{type(estimator).__name__}: grid search on the estimation record in "
-          f"{time.perf_counter() - start:.1f} s; {len(stopped)} fit(s) stopped at "
-          f"max_iter while still improving, {len(linear)} kept their linear model "
+          f"{time.perf_counter() - start:.1f} s; {stopped} fit(s) stopped at "
+          f"max_iter while still improving, {linear} kept their linear model "
           "because every start that beat it ran away beyond the estimation amplitude")
     for params, score in zip(search.cv_results_["params"],
                              search.cv_results_["mean_test_score"]):
@@ -139,15 +144,9 @@ search = HoldoutSearch(
     param_grid={"basis": list(bases.values()), "n_branches": [1, 2]},
 )
 start = time.perf_counter()
-with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always", LinearFallbackWarning)
-    search.fit(data.X_est, data.y_est)
-linear = [w for w in caught if issubclass(w.category, LinearFallbackWarning)]
-for other in caught:
-    if other not in linear:
-        warnings.warn(other.message, other.category)
+linear, = fit_counting(search, LinearFallbackWarning)
 print(f"HoldoutSearch on the estimation record in {time.perf_counter() - start:.1f} s; "
-      f"ranked on its last {search.holdout_fraction_:.0%}; {len(linear)} candidate fit(s) "
+      f"ranked on its last {search.holdout_fraction_:.0%}; {linear} candidate fit(s) "
       "kept their linear model because every start that beat it ran away beyond the "
       "estimation amplitude")
 names = {basis: name for name, basis in bases.items()}

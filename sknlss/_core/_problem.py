@@ -59,10 +59,9 @@ def fit_rows(U, Y, starts, *, n_transient, validation_fraction, steady_state_per
         Sequence boundaries.
     n_transient : int or ndarray of shape (n_sequences,)
         Samples per sequence kept out of the cost. With
-        ``steady_state_period`` (an int then), the last ``n_transient``
-        samples of every sequence are prepended to it instead, so that it
-        starts in (nearly) periodic steady state and all its samples enter the
-        cost.
+        ``steady_state_period``, the last ``n_transient`` samples of every
+        sequence are prepended to it instead, so that it starts in (nearly)
+        periodic steady state and all its samples enter the cost.
     validation_fraction : float or ndarray of shape (n_sequences,)
         Share of the end of every sequence held out.
     steady_state_period : int, default=None

@@ -358,10 +358,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
 
     def _sequence_transients(self, starts):
         """Samples left out of the cost at the start of each sequence:
-        ``fit_transient_``, at most a tenth of each sequence where it comes
-        from the settling time (``n_transient`` is the user's)."""
-        if self.estimate_x0 or self.period is not None:
-            return self.fit_transient_
+        ``fit_transient_``, at most a tenth of each sequence where it exceeds
+        ``n_transient`` (which only the settling time makes it do)."""
         limits = (_MAX_TRANSIENT_SHARE * np.diff(starts)).astype(int)
         return np.maximum(self.n_transient, np.minimum(self.fit_transient_, limits))
 

@@ -182,6 +182,12 @@ def robust_frf(U, Y, starts, period, *, n_transient=0, max_frequency=None):
     return FRFEstimate(bins[keep] / period, G, noise, total)
 
 
+def _lpm_unknowns(n_inputs, degree):
+    """Unknowns of an LPM window per output: a polynomial of ``degree`` for
+    the FRF of every input and one for the transient."""
+    return (degree + 1) * (n_inputs + 1)
+
+
 def lpm_window(n_inputs, order, n_bins, bandwidth=None):
     """Width and polynomial degree of the LPM window.
 
@@ -211,7 +217,7 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
         Number of bins of a window, and the degree used.
     """
     for degree in range(order, -1, -1):
-        n_unknown = (degree + 1) * (n_inputs + 1)
+        n_unknown = _lpm_unknowns(n_inputs, degree)
         smallest = -(-n_unknown // 2)
         if bandwidth is not None:
             candidates = [bandwidth] if bandwidth >= smallest else []
@@ -281,15 +287,14 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
         # A window with more bins than unknowns has a variance estimate, as
         # the bins out of the band would have had.
         empty = np.empty((0, Y.shape[1], n_u), dtype=complex)
-        variance = np.empty(empty.shape) if width > (order + 1) * (n_u + 1) else None
+        variance = np.empty(empty.shape) if width > _lpm_unknowns(n_u, order) else None
         return (np.empty(0), empty, variance, np.empty(0)), False
     # The windows' regressors, factors and residuals take about 2 kB per
     # bin; fitted a block of bins at a time, the memory stays that of the
     # record's DFT however long the record.
     fits = [_lpm_windows(Uf, Yf, block, width, order)
-            for block in np.array_split(centres, max(1, -(-centres.size // _LPM_BLOCK)))]
-    G, noise_var, gain, dof, deficient, window_power = (
-        np.concatenate([fit[k] for fit in fits]) for k in range(6))
+            for block in np.array_split(centres, -(-centres.size // _LPM_BLOCK))]
+    G, noise_var, gain, dof, deficient, window_power = map(np.concatenate, zip(*fits))
     var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
     # A bin without input power of its own (an unexcited line of a periodic
     # input, whose window still holds excited ones) has no FRF to estimate:
