@@ -79,6 +79,34 @@ def test_single_record_with_initial_state_lpm():
     assert rms_error(y_true, without.predict(X)) > 3 * sigma
 
 
+def test_an_initial_state_per_sequence():
+    """Records that start in different states: the BLA estimates one each."""
+    rng = np.random.default_rng(1)
+    n, sigma = 1024, 0.01
+    poles = np.array([0.95 * np.exp(0.2j), 0.95 * np.exp(-0.2j), 0.6])
+    den, num = np.real(np.poly(poles)), np.array([0.0, 0.3, 0.2, 0.1])
+    u = rng.standard_normal(3 * n)
+    y_true = np.concatenate([
+        lfilter(num, den, u[k * n : (k + 1) * n], zi=lfiltic(num, den, y=past))[0]
+        for k, past in enumerate([[3.0, -2.0, 1.0], [-3.0, 0.0, 2.0], [0.0, 0.0, 0.0]])])
+    y = y_true + sigma * rng.standard_normal(3 * n)
+    X, sequence_id = u[:, None], np.repeat([0, 1, 2], n)
+
+    bla = BLAEstimator(n_states=3, estimate_x0=True).fit(X, y, sequence_id=sequence_id)
+    assert bla.x0_.shape == (3, 3)
+    assert bla.n_params_ == 16 + 3 * 3 + 1
+    fitted = bla.predict(X, sequence_id=sequence_id, x0=bla.x0_)
+    assert rms_error(y_true, fitted) < sigma
+    # The third record starts at rest, as other records do by default.
+    assert np.abs(bla.x0_[2]).max() < 0.1
+    np.testing.assert_array_equal(bla.predict(X, sequence_id=sequence_id),
+                                  bla.predict(X, sequence_id=sequence_id, x0=np.zeros(3)))
+    # A state of a new record is searched from zero.
+    w = 50
+    x0 = bla.estimate_initial_state(X[:w], y[:w])
+    assert rms_error(y_true[:n], bla.predict(X[:n], x0=x0)) < sigma
+
+
 def test_pnlss_reference_bla():
     """Acceptance: the BLA of the reference PNLSS system, test RMS <= 0.035."""
     data = make_pnlss_reference()
@@ -467,7 +495,7 @@ def test_input_delay_per_input_column():
     assert search.best_params_["input_delay"] == [1, 4]
 
 
-@pytest.mark.parametrize("delay, cubic", itertools.product([3, 8], [0.0, 0.3]))
+@pytest.mark.parametrize("delay, cubic", list(itertools.product([3, 8], [0.0, 0.3])))
 def test_a_dead_time_left_to_the_states_is_named_in_the_warning(delay, cubic):
     rng = np.random.default_rng(0)
     u = lfilter([1.0], [1.0, -0.5], rng.standard_normal(2000))

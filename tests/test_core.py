@@ -49,9 +49,10 @@ TERMS = {
 DIMS = {"SISO": (2, 1, 1), "MIMO": (3, 2, 2)}
 
 
-def _model(terms, dims, estimate_x0=False, seed=0):
+def _model(terms, dims, estimate_x0=False, seed=0, n_sequences=1):
     n, n_u, n_y = dims
-    model = StateSpaceModel(n, n_u, n_y, TERMS[terms](n, n_u, n_y), estimate_x0=estimate_x0)
+    model = StateSpaceModel(n, n_u, n_y, TERMS[terms](n, n_u, n_y), estimate_x0=estimate_x0,
+                            n_sequences=n_sequences)
     rng = np.random.default_rng(seed)
     theta = 0.2 * rng.standard_normal(model.n_params)
     A = rng.standard_normal((n, n))
@@ -67,10 +68,11 @@ def _data(n_u, seed=1, n_samples=90):
 
 @pytest.mark.parametrize("dims", DIMS.values(), ids=DIMS.keys())
 @pytest.mark.parametrize("terms", TERMS)
-@pytest.mark.parametrize("estimate_x0", [False, True])
-def test_jacobian_matches_central_differences(terms, dims, estimate_x0):
-    model, theta = _model(terms, dims, estimate_x0)
+@pytest.mark.parametrize("x0", ["zero", "shared", "per sequence"])
+def test_jacobian_matches_central_differences(terms, dims, x0):
     U, starts = _data(dims[1])
+    model, theta = _model(terms, dims, x0 != "zero",
+                          n_sequences=len(starts) - 1 if x0 == "per sequence" else 1)
     # Rows outside the cost (here every fifth) are not stored.
     kept = np.arange(len(U)) % 5 != 0
     rows = np.where(kept, np.cumsum(kept) - 1, -1)

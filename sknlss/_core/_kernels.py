@@ -16,8 +16,9 @@ The parameter vector of every model is
 
     theta = [vec(A), vec(B), vec(C), vec(D), theta_terms, x0]
 
-(row-major ``vec``; ``x0`` only when the initial state is estimated, shared
-by all sequences). Entries after ``x0`` (the output offset that
+(row-major ``vec``; ``x0`` only when the initial state is estimated: one
+shared by all sequences, or one per sequence, in their order). Entries after
+``x0`` (the output offset that
 :mod:`sknlss._core._model` adds) are not read, and their columns of the
 Jacobian are left at zero. The terms' parameters ``theta_terms`` are laid
 out by the terms object that owns them.
@@ -57,7 +58,8 @@ simulation time of a one-branch NL-LFR model with the same results to the bit.
     x_k(t+1) = (A + dh_x/dx) x_k(t) + d[A x + B u + h_x]/dtheta_k (direct),
     y_k(t)   = (C + dh_y/dx) x_k(t) + d[C x + D u + h_y]/dtheta_k (direct),
 
-and ``x_k(start) = e_i`` for the i-th initial-state parameter, else 0. Only
+and ``x_k(start) = e_i`` for the i-th initial-state parameter of the
+sequence (of every sequence when they share it), else 0. Only
 the columns that move the state (A, B, the terms' parameters of h_x, x0) are
 propagated; entries below :data:`NEGLIGIBLE_SENSITIVITY` are set to zero.
 
@@ -257,15 +259,15 @@ def simulate(theta, n_outputs, n_terms, spec, work_init, U, starts, x0, evaluate
 
 @njit(
     types.Tuple((_F2, _F2, _F3, _F3, types.boolean))(
-        _F1, _INT, _INT, _INT, _I1, _F1, _F2, _I1, _F2, types.boolean, _I1, types.boolean,
-        types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
+        _F1, _INT, _INT, _INT, _I1, _F1, _F2, _I1, _F2, types.boolean, types.boolean, _I1,
+        types.boolean, types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
         types.FunctionType(PARAMETER_JACOBIAN),
     ),
     cache=True,
 )
 def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, starts,
-                  x0, estimate_x0, jacobian_rows, with_local, evaluate, state_jacobian,
-                  parameter_jacobian):
+                  x0, estimate_x0, x0_per_sequence, jacobian_rows, with_local, evaluate,
+                  state_jacobian, parameter_jacobian):
     """Simulated outputs and states, and the outputs' Jacobian with respect to theta.
 
     Parameters are those of :func:`simulate`, plus
@@ -276,6 +278,10 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, 
     estimate_x0 : bool
         Whether theta ends with the initial state (its sensitivity starts at
         the identity in every sequence).
+    x0_per_sequence : bool
+        Whether theta holds one initial state per sequence (n_sequences *
+        n_states values, in the order of the sequences) rather than one
+        shared by all.
     jacobian_rows : ndarray of int64 of shape (n_samples,)
         Row of ``J`` receiving the derivatives of sample t, or -1 to skip the
         sample (e.g. a transient outside the cost): only the rows the cost
@@ -340,6 +346,9 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, 
     for seq in range(starts.shape[0] - 1):
         for i in range(n):
             s[i] = x0[seq, i]
+        if x0_per_sequence:
+            for k in range(n_x0):
+                columns[o_c + n_state_terms + k] = o_x0 + seq * n + k
         current[:] = 0.0
         for i in range(n_x0):
             current[i, n_moving - n_x0 + i] = 1.0

@@ -151,9 +151,13 @@ class StateSpaceModel:
     terms : Terms, default=None
         The nonlinear terms; ``None`` for a linear model.
     estimate_x0 : bool, default=False
-        Whether the initial state (shared by all sequences) and the output
-        offset end the parameter vector (the offset only when the terms have
-        no ``output_constant``, which holds it otherwise).
+        Whether the initial state and the output offset end the parameter
+        vector (the offset only when the terms have no ``output_constant``,
+        which holds it otherwise).
+    n_sequences : int, default=1
+        Number of sequences, each with its own estimated initial state: the
+        block ``x0`` has shape (n_states,) for one, else (n_sequences,
+        n_states).
 
     Attributes
     ----------
@@ -162,13 +166,16 @@ class StateSpaceModel:
         ``output_constant``, or None without ``estimate_x0``.
     """
 
-    def __init__(self, n_states, n_inputs, n_outputs, terms=None, *, estimate_x0=False):
+    def __init__(self, n_states, n_inputs, n_outputs, terms=None, *, estimate_x0=False,
+                 n_sequences=1):
         self.n_states, self.n_inputs, self.n_outputs = n_states, n_inputs, n_outputs
         self.terms = Terms() if terms is None else terms
         self.estimate_x0 = bool(estimate_x0)
+        self.n_sequences = int(n_sequences)
         own_offset = self.terms.output_constant is None
         self.blocks = self.layout(n_states, n_inputs, n_outputs, self.terms.blocks,
-                                  estimate_x0=self.estimate_x0, output_offset=own_offset)
+                                  estimate_x0=self.estimate_x0, output_offset=own_offset,
+                                  n_sequences=self.n_sequences)
         self.offset_block = (None if not self.estimate_x0 else "y0" if own_offset
                              else self.terms.output_constant)
         sizes = [int(np.prod(shape, dtype=np.int64)) for _, shape in self.blocks]
@@ -179,16 +186,17 @@ class StateSpaceModel:
 
     @staticmethod
     def layout(n_states, n_inputs, n_outputs, terms_blocks=(), *, estimate_x0=False,
-               output_offset=True):
+               output_offset=True, n_sequences=1):
         """The parameter blocks ``(name, shape)`` of the model, known before
         its terms are built: the linear part, the terms' blocks, then x0 with
-        ``estimate_x0``, and y0 too with ``output_offset`` (False for terms with
-        an ``output_constant``)."""
+        ``estimate_x0`` (one per sequence), and y0 too with ``output_offset``
+        (False for terms with an ``output_constant``)."""
         n, n_u, n_y = n_states, n_inputs, n_outputs
         blocks = [("A", (n, n)), ("B", (n, n_u)), ("C", (n_y, n)), ("D", (n_y, n_u))]
         blocks += list(terms_blocks)
         if estimate_x0:
-            blocks += [("x0", (n,))] + ([("y0", (n_y,))] if output_offset else [])
+            blocks += [("x0", (n,) if n_sequences == 1 else (n_sequences, n))]
+            blocks += [("y0", (n_y,))] if output_offset else []
         return blocks
 
     # ---------------------------------------------------------------- layout
@@ -249,10 +257,12 @@ class StateSpaceModel:
     # ------------------------------------------------------------ simulation
     def initial_states(self, theta, n_sequences, x0=None):
         """Initial state of every sequence: ``x0`` if given, else the estimated
-        one in theta, else zero."""
+        one(s) in theta, else zero."""
         if x0 is None:
             if self.estimate_x0:
-                x0 = theta[self.offsets["x0"] : self.offsets["x0"] + self.n_states]
+                begin = self.offsets["x0"]
+                x0 = theta[begin : begin + self.n_sequences * self.n_states].reshape(
+                    -1, self.n_states)
             else:
                 x0 = np.zeros(self.n_states)
         x0 = np.asarray(x0, dtype=np.float64)
@@ -282,6 +292,7 @@ class StateSpaceModel:
             _array(theta), self.n_outputs, self.n_terms,
             terms.n_state_params, _array(terms.spec, np.int64), terms.work_init, *_contiguous(U, starts),
             self.initial_states(theta, len(starts) - 1, x0), self.estimate_x0,
+            self.n_sequences > 1,
             _array(jacobian_rows, np.int64), with_local, *_pointers(terms),
         )
         if self.offset_block == "y0":

@@ -329,7 +329,9 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
     def _initial_states(self, x0, n_sequences):
         n_states = self.A_.shape[0]
         if x0 is None:
-            x0 = self.x0_
+            # The states of several fitted sequences belong to those records
+            # only (and cross-validation scores other records).
+            x0 = self.x0_ if self.x0_.ndim == 1 else np.zeros(n_states)
         with naming("x0"):
             x0 = np.asarray(x0, dtype=np.float64)
         if x0.shape not in ((n_states,), (n_sequences, n_states)):
@@ -354,8 +356,10 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Initial state in the model's (normalised) state coordinates; with
             one row per sequence, row ``k`` starts the ``k``-th sequence in the
             order of the rows of ``X`` (not in the sorted order of the labels).
-            ``None`` uses the fitted ``x0_`` (zero unless it was estimated);
-            a nonlinear model fitted with ``period`` and ``n_transient`` then
+            ``None`` uses the fitted ``x0_`` (zero unless it was estimated,
+            and zero when ``x0_`` holds one state per fitted sequence: pass
+            ``x0=model.x0_`` to simulate those sequences); a nonlinear model
+            fitted with ``period`` and ``n_transient`` then
             starts every sequence whose input repeats with the period in its
             periodic steady state.
         return_states : bool, default=False
@@ -432,7 +436,8 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output.
         x0 : array-like of shape (n_states,), default=None
-            Where the search starts; ``None`` uses the fitted ``x0_``.
+            Where the search starts; ``None`` uses the fitted ``x0_`` (as
+            ``simulate`` does).
         max_iter : int, default=100
             Maximum number of Levenberg-Marquardt iterations.
 

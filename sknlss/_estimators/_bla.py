@@ -91,8 +91,8 @@ class LinearFit:
     ----------
     A, B, C, D : ndarray
         Balanced realization.
-    x0 : ndarray of shape (n_states,)
-        Initial state (zero unless estimated).
+    x0 : ndarray of shape (n_states,) or (n_sequences, n_states)
+        Initial state (zero unless estimated), one per sequence for several.
     output_offset : ndarray of shape (n_outputs,)
         Output offset estimated with ``x0`` (zero unless estimated).
     hankel_singular_values : ndarray or None
@@ -350,7 +350,8 @@ def _parametric(estimate, U, Y, starts, mask, params):
     A, B, C, D, hsv = balanced_realization(A, B, C, D)
     # The least-squares initial state checks every model; the fit keeps it
     # only with estimate_x0.
-    x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask)
+    x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask,
+                                               per_sequence=params["estimate_x0"])
     error = _simulation_nrmse(A, B, C, D, U, Y, starts, mask, x0, output_offset)
     if not params["estimate_x0"]:
         x0, output_offset = np.zeros(n), np.zeros(n_y)
@@ -363,8 +364,8 @@ def _simulation_nrmse(A, B, C, D, U, Y, starts, mask, x0, offset):
     """Largest RMS error over the outputs, relative to each output's standard
     deviation, of the model's simulation over the rows ``mask`` from ``x0``
     with the output ``offset``; inf for a diverging simulation."""
-    Y_sim, _, diverged = simulate_linear(A, B, C, D, U, starts,
-                                         np.tile(x0, (len(starts) - 1, 1)))
+    Y_sim, _, diverged = simulate_linear(
+        A, B, C, D, U, starts, np.broadcast_to(x0, (len(starts) - 1, A.shape[0])))
     if diverged:
         return np.inf
     return float(np.max(nrmse(Y[mask], Y_sim[mask] + offset, multioutput="raw_values")))
@@ -396,7 +397,8 @@ def _set_fitted(bla, fit, normalisation):
             bla.total_variance_ = bla.noise_variance_ if total is noise else total * scale**2
     bla.n_iter_, bla.loss_history_ = fit.n_iter, fit.loss_history
     bla.n_params_ = parameter_count(StateSpaceModel.layout(
-        n, fit.B.shape[1], n_y, estimate_x0=bla.estimate_x0))
+        n, fit.B.shape[1], n_y, estimate_x0=bla.estimate_x0,
+        n_sequences=len(np.atleast_2d(fit.x0))))
 
 
 def fitted_bla(params, fit, normalisation):
@@ -479,8 +481,8 @@ class BLAEstimator(_BaseStateSpace):
     tol : float, default=1e-10
         Relative cost decrease below which the refinement stops.
     estimate_x0 : bool, default=False
-        Estimate the initial state (one state shared by all sequences) and a
-        correction of the output offset by linear least squares on the
+        Estimate the initial state of every sequence and a correction of
+        the output offset by linear least squares on the
         estimation data; else ``x0_`` is zero.
     input_delay : int or array-like of int, default=0
         Dead time in samples between each input column and its first effect
@@ -517,8 +519,10 @@ class BLAEstimator(_BaseStateSpace):
         Output matrix.
     D_ : ndarray of shape (n_outputs, n_inputs)
         Feed-through matrix.
-    x0_ : ndarray of shape (n_states,)
-        Initial state, zero unless ``estimate_x0``.
+    x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
+        Initial state, zero unless ``estimate_x0``; one per sequence when the
+        model was fitted on several (``predict`` starts other records from
+        zero then).
     output_offset_ : ndarray of shape (n_outputs,)
         Correction of the output offset estimated with ``x0_`` (normalised
         units, zero unless ``estimate_x0``): the mean of a record that does not
@@ -547,7 +551,7 @@ class BLAEstimator(_BaseStateSpace):
     n_params_ : int
         Number of parameters, ``n^2 + n n_u + n_y n + n_y n_u`` (plus
         ``n + n_y``, the initial state and the output offset, with
-        ``estimate_x0``).
+        ``estimate_x0``; ``n`` per sequence for several).
     n_iter_ : int
         Levenberg-Marquardt iterations performed.
     loss_history_ : ndarray of shape (n_iter_ + 1,)

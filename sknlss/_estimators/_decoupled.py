@@ -122,7 +122,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         continuation of the fitted model: a change after the fit takes effect
         at the next one.
     estimate_x0 : bool, default=False
-        Estimate the initial state (shared by all sequences, forwarded to the
+        Estimate the initial state of every sequence (forwarded to the
         PNLSS model) and a constant output offset with it
         (``output_offset_``); ``predict`` then starts from ``x0_``. A long
         ``n_transient`` holds it (see ``n_transient``).
@@ -241,8 +241,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Lowest and highest value of each branch input on the estimation
         record simulated by the fitted model: beyond it the branches go on as
         ``extrapolation`` says.
-    x0_ : ndarray of shape (n_states,)
-        Initial state (zero unless ``estimate_x0``).
+    x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
+        Initial state (zero unless ``estimate_x0``), one per sequence when
+        the model was fitted on several; ``predict`` starts other records
+        from zero then.
     output_offset_ : ndarray of shape (n_outputs,)
         Constant output offset estimated with ``x0_`` (normalised units, zero
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
@@ -262,7 +264,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
         ``+ (n + n_u) r + (n + n_y) r`` (V, W) ``+ (d - 1) r`` (branches)
-        ``+ n + n_y`` (x0 and the output offset, with ``estimate_x0``).
+        ``+ n + n_y`` (x0 and the output offset, with ``estimate_x0``; ``n``
+        per sequence for several).
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)

@@ -318,9 +318,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         as those of a bounded basis standing in for a polynomial (see the
         user guide).
     estimate_x0 : bool, default=False
-        Estimate the initial state, shared by all sequences, and a constant
-        output offset with it (``output_offset_``); ``predict`` then starts
-        from the fitted ``x0_``. A long ``n_transient`` holds it (see
+        Estimate the initial state of every sequence, and a constant output
+        offset with it (``output_offset_``); ``predict`` then starts from the
+        fitted ``x0_``. A long ``n_transient`` holds it (see
         ``n_transient``).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
@@ -441,8 +441,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     extrapolation_ : {"linear", "continue"}
         The continuation of the branches beyond ``branch_input_range_``
         (``extrapolation``, with ``"auto"`` resolved for ``basis_``).
-    x0_ : ndarray of shape (n_states,)
-        Initial state (zero unless ``estimate_x0``).
+    x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
+        Initial state (zero unless ``estimate_x0``), one per sequence when
+        the model was fitted on several; ``predict`` starts other records
+        from zero then.
     output_offset_ : ndarray of shape (n_outputs,)
         Constant output offset estimated with ``x0_`` (normalised units, zero
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
@@ -453,7 +455,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
         ``+ r (n + n_y) + r (n + n_u) + r n_basis`` (plus ``n + n_y``, x0 and
-        the output offset, with ``estimate_x0``).
+        the output offset, with ``estimate_x0``; ``n`` per sequence for
+        several).
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps of the kept start.
     loss_history_ : ndarray of shape (n_iter_ + 1,)

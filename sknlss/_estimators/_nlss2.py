@@ -104,9 +104,8 @@ def _state_ridge(linear, alpha):
 def _initial_theta(context, alpha, activation, n_neurons, seed):
     """Parameters of the linear model plus networks fitted on its estimated states.
 
-    The initial state (when estimated) is the mean of the estimated first
-    states of the fitted sequences (the model has one initial state shared by
-    all sequences). The output networks, fitted to the whole output residual,
+    The initial states (when estimated) are the estimated first states of
+    the fitted sequences. The output networks, fitted to the whole output residual,
     hold its constant in their biases (they are the model's output offset).
     """
     model, U_fit, Y_fit, starts_fit = (context[key] for key in
@@ -118,7 +117,7 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
     values.update(_fit_networks(states, U_fit, Y_fit, starts_fit, linear, n_neurons,
                                 activation, seed))
     if model.estimate_x0:
-        values["x0"] = states[starts_fit[:-1]].mean(axis=0)
+        values["x0"] = states[starts_fit[:-1]]
     return model.pack(values)
 
 
@@ -159,8 +158,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     activation : {"sigmoid", "tanh"}, default="sigmoid"
         Activation of the hidden units.
     estimate_x0 : bool, default=False
-        Estimate the initial state shared by all sequences (as in PNLSS-I),
-        and a constant output offset with it (the output networks' biases
+        Estimate the initial state of every sequence (as in PNLSS-I), and a
+        constant output offset with it (the output networks' biases
         hold it). A long ``n_transient`` holds it (see ``n_transient``).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
@@ -277,8 +276,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     g_hidden_biases_ : ndarray of shape (n_outputs, n_neurons)
     g_output_weights_ : ndarray of shape (n_outputs, n_neurons)
     g_output_biases_ : ndarray of shape (n_outputs,)
-    x0_ : ndarray of shape (n_states,)
-        Initial state (zero unless ``estimate_x0``).
+    x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
+        Initial state (zero unless ``estimate_x0``), one per sequence when
+        the model was fitted on several; ``predict`` starts other records
+        from zero then.
     output_offset_ : ndarray of shape (n_outputs,)
         Zero: the biases of the output networks, ``g_output_biases_``, hold
         the constant output offset that the other estimators estimate with
@@ -297,7 +298,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of free parameters: ``(n_states + n_outputs) * (n_states +
         n_inputs + 1 + n_neurons * (n_states + n_inputs + 2))``, plus
-        ``n_states`` with ``estimate_x0``. For ``n_states=3``, one input, one
+        ``n_states`` per sequence with ``estimate_x0``. For ``n_states=3``, one input, one
         output and ``n_neurons=2``: 68, or 71 with the initial state, as the
         paper counts.
     n_iter_ : int

@@ -212,9 +212,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     f"{PERIODIC_TOLERANCE:.0%} of its standard deviation. The fit treats "
                     "every sequence as periodic; predict simulates such a sequence from "
                     "its initial state.", DataWarning)
-            # One estimated initial state can absorb the start of one sequence,
-            # not those of several realizations, each in its own steady state.
-            if self.n_transient == 0 and (not self.estimate_x0 or len(lengths) > 1):
+            # Without estimated initial states, every sequence starts at rest.
+            if self.n_transient == 0 and not self.estimate_x0:
                 warn_at_caller(
                     f"{type(self).__name__}: period={self.period} with n_transient=0 "
                     "prepends nothing: every sequence is simulated from the initial "
@@ -263,7 +262,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         """The simulation-error problem of a model with ``terms`` on ``rows``;
         with ``x0_held``, the search holds the initial state."""
         model = StateSpaceModel(self.n_states, rows.U.shape[1], rows.Y.shape[1], terms,
-                                estimate_x0=self.estimate_x0)
+                                estimate_x0=self.estimate_x0,
+                                n_sequences=len(rows.starts) - 1)
         return SimulationErrorProblem(
             model, rows, frequency_period=self.period if self.cost == "frequency" else None,
             stability_penalty=self.stability_penalty, weight_decay=self.weight_decay,
@@ -385,7 +385,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         n_terms = self._n_terms_params(n_u, n_y)
         n_params = n_terms + parameter_count(StateSpaceModel.layout(
             self.n_states, n_u, n_y, estimate_x0=self.estimate_x0,
-            output_offset=self._terms_output_constant is None))
+            output_offset=self._terms_output_constant is None, n_sequences=len(starts) - 1))
         # The largest Jacobian: the smallest hold-out and the shortest transient.
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
                                  validation_fraction=self._sequence_fractions(
@@ -497,7 +497,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
     def _warn_if_worse_than_the_mean(self, U, Y, starts):
         """Warn when the fitted model simulates its estimation record worse than
         the output's mean: such a model should not be taken silently."""
-        x0 = np.tile(self.x0_, (len(starts) - 1, 1))
+        x0 = np.broadcast_to(self.x0_, (len(starts) - 1, self.n_states))
         Y_model, _, diverged = self._simulate_normalized(U, starts, x0, steady_state=True)
         # Periodic records are simulated in steady state: all their rows count.
         rows = transient_mask(starts, 0 if self.period is not None
@@ -758,10 +758,11 @@ def _settling_time(A):
 
 def _similarity_directions(problem):
     """Directions in which a similarity transform of the states leaves the
-    output of ``problem`` unchanged: ``n**2``, or the ``n**2 - n`` transforms
-    that keep the initial state when the problem holds it."""
+    output of ``problem`` unchanged: ``n**2``, or, when the problem holds the
+    initial states of ``k`` sequences, the ``n**2 - k n`` transforms that
+    keep them (taken as independent; none for ``k >= n``)."""
     n = problem.model.n_states
-    return n * n - (n if problem.held.size else 0)
+    return n * n - n * min(n, problem.held.size // n)
 
 
 def n_cost_values(problem):

@@ -66,8 +66,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         box differ. ``fit`` fixes the continuation of the fitted model: a
         change after the fit takes effect at the next one.
     estimate_x0 : bool, default=False
-        Estimate the initial state, shared by all sequences (PNLSS-I), and
-        a constant output offset with it (``output_offset_``); ``predict``
+        Estimate the initial state of every sequence (PNLSS-I), and a
+        constant output offset with it (``output_offset_``); ``predict``
         then starts from the fitted ``x0_``. A long ``n_transient`` holds
         it (see ``n_transient``).
     center : bool, default=True
@@ -199,8 +199,10 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         the polynomials see) on the estimation record simulated by the fitted
         model: beyond this box the polynomials go on as ``extrapolation``
         says.
-    x0_ : ndarray of shape (n_states,)
-        Initial state (zero unless ``estimate_x0``).
+    x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
+        Initial state (zero unless ``estimate_x0``), one per sequence when
+        the model was fitted on several; ``predict`` starts other records
+        from zero then.
     output_offset_ : ndarray of shape (n_outputs,)
         Constant output offset estimated with ``x0_`` (normalised units, zero
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
@@ -208,7 +210,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of free parameters:
         ``n^2 + n n_u + n_y n + n_y n_u + n n_zeta + n_y n_eta``, plus ``n``
-        for x0 with ``estimate_x0`` (as the paper counts PNLSS-I) and ``n_y``
+        per sequence for x0 with ``estimate_x0`` (as the paper counts PNLSS-I)
+        and ``n_y``
         for the output offset estimated with it (which the paper does not
         count).
     n_iter_ : int

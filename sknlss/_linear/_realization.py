@@ -373,8 +373,9 @@ def simulate_linear(A, B, C, D, U, starts, x0):
     return model.simulate(theta, U, starts, x0)
 
 
-def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
-    """Least-squares initial state shared by all sequences, with an output offset.
+def estimate_initial_state(A, B, C, D, U, Y, starts, mask, *, per_sequence=False):
+    """Least-squares initial state (shared by all sequences, or one per
+    sequence), with an output offset.
 
     The output is linear in the initial state: ``y = y_forced + Phi x0 + d``,
     where column ``i`` of ``Phi`` is the zero-input response from ``e_i``. The
@@ -399,14 +400,19 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     Y : ndarray of shape (n_samples, n_y)
         Measured output.
     starts : ndarray of shape (n_sequences + 1,)
-        Sequence boundaries; every sequence starts from the same state.
+        Sequence boundaries.
     mask : ndarray of bool of shape (n_samples,)
         Rows entering the least-squares cost.
+    per_sequence : bool, default=False
+        Estimate the initial state of every sequence; else every sequence
+        starts from the same state.
 
     Returns
     -------
-    x0 : ndarray of shape (n,)
+    x0 : ndarray of shape (n,), or (n_sequences, n) with ``per_sequence`` and
+        several sequences
     offset : ndarray of shape (n_y,)
+        One output offset for all sequences.
         Output offset ``d``. Both are zero for a model whose simulation
         diverges on the record.
     """
@@ -421,10 +427,16 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
         free, _, free_diverged = simulate_linear(A, B, C, D, no_input, starts, e)
         diverged |= free_diverged
         free_responses.append(free)
-    columns = [free[mask].ravel() for free in free_responses]
+    shape = (n_seq, n) if per_sequence and n_seq > 1 else (n,)
     if diverged:
         # No initial state fits a model that diverges on the record.
-        return np.zeros(n), np.zeros(n_y)
+        return np.zeros(shape), np.zeros(n_y)
+    if len(shape) == 2:
+        # The free response from e_i in one sequence, zero in the others.
+        sequence_of_row = np.repeat(np.arange(n_seq), np.diff(starts))
+        free_responses = [np.where((sequence_of_row == k)[:, None], free, 0.0)
+                          for k in range(n_seq) for free in free_responses]
+    columns = [free[mask].ravel() for free in free_responses]
     n_rows = int(mask.sum())
     constant = np.tile(np.eye(n_y), (n_rows, 1))
     Phi = np.column_stack(columns + [constant])
@@ -444,7 +456,8 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask):
     # them: the minimum-norm solution leaves it out instead of fitting the
     # noise with a huge state.
     sol = np.linalg.lstsq(Phi, target, rcond=_STATE_RCOND)[0]
-    return sol[:n], sol[n:]
+    n_x0 = len(free_responses)
+    return sol[:n_x0].reshape(shape), sol[n_x0:]
 
 
 def _leading_rows(starts, mask):
