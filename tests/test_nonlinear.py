@@ -27,6 +27,7 @@ from sknlss._core._model import StateSpaceModel
 from sknlss._core._problem import SimulationErrorProblem, fit_rows
 from sknlss._estimators._nonlinear import (
     _prefer_finite_when_doubled,
+    _settling_time,
     escapes_when_doubled,
     stays_bounded,
 )
@@ -375,18 +376,60 @@ def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
     # log(0.01) / log(0.5) = 6.6 samples; at most a tenth of the 1000-sample
     # record, which is also what a mode that does not decay takes.
     starts = np.array([0, 1000])
-    A = np.diag([radius, 0.0])
+    settling_time = _settling_time(_linear_model(np.diag([radius, 0.0])),
+                                   np.ones((1000, 1)), starts)
 
     def cost_transient(**params):
         model = PNLSSRegressor(2, **params)
         model.input_delay_ = np.array([params.get("input_delay", 0)])  # as fit sets it
-        return model._cost_transient(A, starts)
+        return model._cost_transient(settling_time, starts)
 
     assert cost_transient() == skipped
     # The unmeasured input that a delay brings in starts a transient too.
     assert cost_transient(input_delay=3) == min(skipped + 3, 100)
     assert cost_transient(n_transient=200) == 200
     assert cost_transient(estimate_x0=True) == 0
+
+
+def _linear_model(A, B=None, C=None):
+    """A linear model keyed by block name, one input and one output; B and C
+    of ones by default."""
+    n = A.shape[0]
+    return {"A": A, "B": np.ones((n, 1)) if B is None else B,
+            "C": np.ones((1, n)) if C is None else C, "D": np.zeros((1, 1))}
+
+
+def test_a_mode_that_does_not_show_in_the_output_does_not_settle():
+    # A slow mode that the input barely drives, or that the output barely
+    # sees, is not waited for: 44 samples for the mode at 0.9, not the 4603
+    # of the mode at 0.999.
+    U = np.random.default_rng(0).standard_normal((2000, 1))
+    starts = np.array([0, 2000])
+    A = np.diag([0.9, 0.999])
+    assert _settling_time(_linear_model(A), U, starts) == 4603
+    assert _settling_time(_linear_model(A, C=np.array([[1.0, 1e-4]])), U, starts) == 44
+    assert _settling_time(_linear_model(A, B=np.array([[1.0], [1e-5]])), U, starts) == 44
+    # In any coordinates.
+    T = np.array([[1.0, 2.0], [-1.0, 0.5]])
+    similar = _linear_model(T @ A @ np.linalg.inv(T), B=T @ np.array([[1.0], [1e-5]]),
+                            C=np.array([[1.0, 1e-4]]) @ np.linalg.inv(T))
+    assert _settling_time(similar, U, starts) == 44
+    # A mode that does not decay is waited for whatever its size.
+    assert _settling_time(_linear_model(np.diag([0.9, 1.0]), C=np.array([[1.0, 1e-6]])),
+                          U, starts) == np.inf
+
+
+def test_spurious_poles_of_an_over_ordered_model_leave_the_transient_alone():
+    # Four states for a two-state system: the BLA's spare poles at 0.998 once
+    # set a transient of 2761 samples (cut to a tenth of the record); the
+    # system's own poles, at 0.837, settle in 26.
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal(4000)
+    y = lfilter([0, 0.5, 0.3], [1, -1.5, 0.7], u)
+    y = y + 0.1 * np.tanh(y) ** 3 + 0.01 * np.std(y) * rng.standard_normal(4000)
+    model = NLLFRRegressor(n_states=4, n_init=1, max_iter=1).fit(u[:, None], y)
+    assert np.max(np.abs(model.bla_.poles_)) > 0.99
+    assert model.fit_transient_ == 26
 
 
 def test_each_sequence_skips_the_settling_time_up_to_a_tenth_of_itself():
@@ -396,7 +439,7 @@ def test_each_sequence_skips_the_settling_time_up_to_a_tenth_of_itself():
     starts = np.array([0, 1000, 1150, 1180])
     model = PNLSSRegressor(2)
     model.input_delay_ = np.array([0])
-    model.fit_transient_ = model._cost_transient(np.diag([0.99, 0.0]), starts)
+    model.fit_transient_ = model._cost_transient(459, starts)
     assert model.fit_transient_ == 100
     np.testing.assert_array_equal(model._sequence_transients(starts), [100, 15, 3])
     model.n_transient = 20

@@ -213,12 +213,12 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         (every sample of a sequence simulated in steady state then counts, in
         the cost and in the score).
         With ``estimate_x0``, a transient at least as long as the settling time
-        of the slowest mode of the PNLSS model's ``A_`` (to 1 %; never when
-        that mode does not decay) leaves the initial state undetermined: the
-        search then holds it at the PNLSS model's ``x0_``. Without
-        ``estimate_x0`` and ``period``, the cost also skips the settling time
-        of the linear model's slowest pole (to 1 %, at most a tenth of
-        each sequence).
+        of the slowest mode of the PNLSS model's linear part that shows in its
+        output (to 1 %; never when a mode does not decay) leaves the initial
+        state undetermined: the search then holds it at the PNLSS model's
+        ``x0_``. Without ``estimate_x0`` and ``period``, the cost also skips
+        the settling time of the linear model's slowest mode that shows in its
+        output (to 1 %, at most a tenth of each sequence).
     verbose : int, default=0
         Print the progress of the optimisation when positive: every iteration
         of every start (where the start runs, a joblib worker with

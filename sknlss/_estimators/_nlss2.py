@@ -248,11 +248,12 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         (every sample of a sequence simulated in steady state then counts, in
         the cost and in the score).
         With ``estimate_x0``, a transient at least as long as the settling time
-        of the slowest mode of ``bla_`` (to 1 %) leaves the initial state
-        undetermined: the search then holds it at its starting value (see the
-        user guide). Without ``estimate_x0`` and ``period``, the cost also
-        skips the settling time of the linear model's slowest pole (to 1 %, at
-        most a tenth of each sequence).
+        of the slowest mode of ``bla_`` that shows in its output (to 1 %)
+        leaves the initial state undetermined: the search then holds it at its
+        starting value (see the user guide). Without ``estimate_x0`` and
+        ``period``, the cost also skips the settling time of the linear
+        model's slowest mode that shows in its output (to 1 %, at most a tenth
+        of each sequence).
     verbose : int, default=0
         Print the progress of the optimisation when positive: every iteration
         of every start (where the start runs, a joblib worker with

@@ -41,7 +41,7 @@ from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import (PERIODIC_TOLERANCE, holdout_masks, part_before_holdout,
                                 periodic_sequences, steady_state_rows, transient_mask)
-from .._linear._realization import spectral_radius
+from .._linear._realization import simulate_linear, spectral_radius
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import DataWarning, LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
@@ -57,8 +57,9 @@ _AUTO_SHARES = (0.25, 0.3, 0.35, 0.275, 0.325)
 #: Sequences shorter than this are not split by ``validation_fraction="auto"``.
 _MIN_SPLIT_LENGTH = 100
 #: Without an estimated initial state, the cost skips the samples in which the
-#: slowest pole of the linear model decays to this fraction, at most this
-#: share of each sequence.
+#: slowest mode of the linear model that shows in its output (by at least this
+#: fraction of the output's scale) decays to this fraction, at most this share
+#: of each sequence.
 _SETTLED = 1e-2
 _MAX_TRANSIENT_SHARE = 0.1
 #: Relative margin above the linear start's error on the cost rows within which
@@ -247,16 +248,16 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return {"A": linear.A, "B": linear.B, "C": linear.C, "D": linear.D, "x0": linear.x0,
                 "y0": linear.output_offset}
 
-    def _holds_x0(self, A):
+    def _holds_x0(self, settling_time):
         """Whether the search holds the initial state at its starting value:
         with ``estimate_x0``, when the transient left out of the cost
         (``n_transient``, also the samples prepended for the steady state)
-        outlasts the settling time of the linear start's slowest mode. The
-        state's effect has then died out where the cost starts: a search would
-        move it far away to fit the noise, and the model would run away over
-        the transient."""
+        outlasts the ``settling_time`` of the linear start. The state's effect
+        has then died out where the cost starts: a search would move it far
+        away to fit the noise, and the model would run away over the
+        transient."""
         return (self.estimate_x0 and self.n_transient > 0
-                and _settling_time(A) <= self.n_transient)
+                and settling_time <= self.n_transient)
 
     def _problem(self, terms, rows, x0_held):
         """The simulation-error problem of a model with ``terms`` on ``rows``;
@@ -342,18 +343,18 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             return share
         return np.where(np.diff(starts) < _MIN_SPLIT_LENGTH, 0.0, share)
 
-    def _cost_transient(self, A, starts):
+    def _cost_transient(self, settling_time, starts):
         """Samples left out of the cost at the start of the longest sequence:
         ``n_transient``, and without an estimated initial state, at least the
-        settling time of the linear model's slowest pole (a record rarely
-        starts at rest) after the largest input delay (whose unmeasured
-        samples start it too)."""
+        ``settling_time`` of the linear start (a record rarely starts at rest)
+        after the largest input delay (whose unmeasured samples start it
+        too)."""
         if self.estimate_x0 or self.period is not None:
             return self.n_transient
         # A mode that does not decay never settles (the decoupled model starts
         # from a PNLSS model's linear part, which may grow).
         limit = int(_MAX_TRANSIENT_SHARE * np.max(np.diff(starts)))
-        settled = _settling_time(A) + int(np.max(self.input_delay_, initial=0))
+        settled = settling_time + int(np.max(self.input_delay_, initial=0))
         return max(self.n_transient, min(settled, limit))
 
     def _sequence_transients(self, starts):
@@ -451,12 +452,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                             validation_fraction=self._sequence_fractions(max(shares), starts),
                             steady_state_period=self.period)
         linear = self._linear_start(U, Y, starts, bla_rows.fit_rows[bla_rows.original])
-        self.fit_transient_ = self._cost_transient(linear["A"], starts)
+        settling_time = _settling_time(linear, U, starts)
+        self.fit_transient_ = self._cost_transient(settling_time, starts)
         rows = {share: fit_rows(U, Y, starts, n_transient=self._sequence_transients(starts),
                                 validation_fraction=self._sequence_fractions(share, starts),
                                 steady_state_period=self.period)
                 for share in self._row_shares(shares)}
-        x0_held = self._holds_x0(linear["A"])
+        x0_held = self._holds_x0(settling_time)
         problem_sets = [{share: self._problem(terms, rows[share], x0_held) for share in rows}
                         for terms in self._candidate_terms(U.shape[1], Y.shape[1])]
         # The problem with the largest hold-out serves the work shared by all
@@ -745,15 +747,50 @@ def ranged_prediction_terms(model, theta, U, starts, extrapolation):
                                         **_CONTINUATIONS[extrapolation])
 
 
-def _settling_time(A):
-    """Samples over which the slowest mode of ``A`` decays to ``_SETTLED`` of
-    its size (inf when it does not decay)."""
+def _settling_time(linear, U, starts):
+    """Samples over which the slowest mode of the ``linear`` model (keyed by
+    block name) that shows in its output decays to ``_SETTLED`` of its size;
+    inf when a mode does not decay.
+
+    A mode shows when, simulated from rest on the input ``U``, its part of an
+    output reaches ``_SETTLED`` of that output's scale in RMS: a record starts
+    from such a typical state. An over-ordered model has slow poles that
+    barely reach the output, and the settling time of such a pole would
+    leave a tenth of the record out of the cost for nothing.
+    """
+    A = linear["A"]
     radius = spectral_radius(A)
     if radius >= 1.0:
         return np.inf
-    if radius > 0.0:
-        return int(np.ceil(np.log(_SETTLED) / np.log(radius)))
-    return 0
+    poles, shows = _modes_that_show(linear, U, starts)
+    moduli = np.abs(poles)
+    if not shows.any() or radius == 0.0:
+        return 0
+    # The slowest mode's own radius when it shows (the same value as ever).
+    slowest = radius if shows[moduli >= radius * (1 - _ROUNDING_MARGIN)].any() else np.max(
+        moduli[shows])
+    return int(np.ceil(np.log(_SETTLED) / np.log(slowest))) if slowest > 0.0 else 0
+
+
+def _modes_that_show(linear, U, starts):
+    """The eigenvalues of ``linear["A"]`` and which of them have a part in an
+    output of at least ``_SETTLED`` in RMS, simulated from rest on ``U``
+    (normalised units: each output's scale is 1). All of them when the modes
+    cannot be told apart (defective ``A``) or the simulation diverges."""
+    A, C = linear["A"], linear["C"]
+    everything = np.ones(A.shape[0], dtype=bool)
+    states, diverged = simulate_linear(A, linear["B"], C, linear["D"], U, starts,
+                                       np.zeros((len(starts) - 1, A.shape[0])))[1:]
+    poles, V = np.linalg.eig(A)
+    if diverged:
+        return poles, everything
+    try:
+        modal = np.linalg.solve(V, states.T)
+    except np.linalg.LinAlgError:
+        return poles, everything
+    size = np.max(np.abs(C @ V), axis=0) * np.sqrt(np.mean(np.abs(modal) ** 2, axis=1))
+    # NaN (an overflow of a nearly defective A) counts as showing.
+    return poles, ~(size < _SETTLED)
 
 
 def _similarity_directions(problem):
