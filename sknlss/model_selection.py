@@ -30,6 +30,17 @@ def _fit_candidate(estimator, params, X, y, sequence_id):
     return clone(estimator).set_params(**params).fit(X, y, sequence_id=sequence_id)
 
 
+def _fitted_states(model):
+    """The initial states ``model`` fitted to each of its training sequences,
+    to simulate them again; None (its own default) when it has one state for
+    all, or when it starts periodic sequences in steady state (which a given
+    state would override)."""
+    states = getattr(model, "x0_", None)
+    periodic = (getattr(model, "period", None) is not None
+                and getattr(model, "n_transient", 0) > 0)
+    return states if np.ndim(states) == 2 and not periodic else None
+
+
 def _holdout_errors(model, X, Y, sequence_id, rows):
     """Coefficient of determination and RMS error of the free-run simulation on
     ``rows`` (uniform average over the outputs); ``-inf`` and ``inf`` when the
@@ -37,7 +48,10 @@ def _holdout_errors(model, X, Y, sequence_id, rows):
     with warnings.catch_warnings():
         # A candidate that diverges is ranked last; that is its whole outcome.
         warnings.simplefilter("ignore", SimulationDivergedWarning)
-        simulated = np.asarray(model.predict(X, sequence_id=sequence_id)).reshape(Y.shape)
+        states = _fitted_states(model)
+        given = {} if states is None else {"x0": states}
+        simulated = np.asarray(model.predict(X, sequence_id=sequence_id, **given)).reshape(
+            Y.shape)
     if not np.all(np.isfinite(simulated[rows])):
         return -np.inf, np.inf
     # In units of a power of two near each output's largest value, measured or
@@ -264,7 +278,8 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         sequence_id : array-like of shape (n_samples,), default=None
             Sequence labels.
         x0 : array-like, default=None
-            Initial state; ``None`` uses the selected model's fitted ``x0_``.
+            Initial state; ``None`` starts as the selected model's ``predict``
+            does (from its fitted ``x0_``).
 
         Returns
         -------
@@ -306,7 +321,8 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output.
         x0 : array-like of shape (n_states,), default=None
-            Where the search starts; ``None`` uses the selected model's ``x0_``.
+            Where the search starts; ``None`` starts as the selected model's
+            ``estimate_initial_state`` does.
         max_iter : int, default=100
             Maximum number of Levenberg-Marquardt iterations.
 

@@ -97,14 +97,57 @@ def test_an_initial_state_per_sequence():
     assert bla.n_params_ == 16 + 3 * 3 + 1
     fitted = bla.predict(X, sequence_id=sequence_id, x0=bla.x0_)
     assert rms_error(y_true, fitted) < sigma
-    # The third record starts at rest, as other records do by default.
     assert np.abs(bla.x0_[2]).max() < 0.1
-    np.testing.assert_array_equal(bla.predict(X, sequence_id=sequence_id),
-                                  bla.predict(X, sequence_id=sequence_id, x0=np.zeros(3)))
-    # A state of a new record is searched from zero.
+    # Other records start from the mean of the fitted states.
+    np.testing.assert_array_equal(
+        bla.predict(X, sequence_id=sequence_id),
+        bla.predict(X, sequence_id=sequence_id, x0=bla.x0_.mean(axis=0)))
+    # A state of a new record is searched from their mean.
     w = 50
     x0 = bla.estimate_initial_state(X[:w], y[:w])
     assert rms_error(y_true[:n], bla.predict(X[:n], x0=x0)) < sigma
+
+
+@pytest.mark.parametrize("penalised", [False, True])
+def test_states_per_sequence_solve_the_joint_least_squares(penalised):
+    # Sequence by sequence, the states and the shared offset are those of the
+    # joint least squares with a column per state (a sequence without cost
+    # rows gets zero).
+    from sknlss._linear._realization import (_leading_rows, estimate_initial_state,
+                                             simulate_linear)
+
+    rng = np.random.default_rng(0)
+    A, B = np.array([[0.9, 0.2], [-0.2, 0.8]]), np.array([[1.0], [0.5]])
+    C, D = np.array([[1.0, -0.3], [0.2, 1.0]]), np.zeros((2, 1))
+    lengths = [50, 80, 30, 120]
+    starts = np.cumsum([0] + lengths)
+    U = rng.standard_normal((starts[-1], 1))
+    Y = simulate_linear(A, B, C, D, U, starts, rng.standard_normal((4, 2)))[0] + [0.3, -0.2]
+    Y = Y + 0.01 * rng.standard_normal(Y.shape)
+    mask = np.arange(starts[-1]) % 3 != 0 if penalised else np.ones(starts[-1], dtype=bool)
+    mask[starts[2] : starts[3]] = False
+    states, offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask, per_sequence=True)
+
+    free = np.stack([simulate_linear(A, B, C, D, np.zeros_like(U), starts,
+                                     np.tile(e, (4, 1)))[0] for e in np.eye(2)], axis=-1)
+    target = Y - simulate_linear(A, B, C, D, U, starts, np.zeros((4, 2)))[0]
+    sequence = np.repeat(np.arange(4), lengths)
+    columns = [np.where((sequence == k)[:, None], free[:, :, i], 0.0)
+               for k in range(4) for i in range(2)]
+    rows = [np.column_stack([c[mask].ravel() for c in columns]
+                            + [np.tile(np.eye(2), (mask.sum(), 1))])]
+    values = [target[mask].ravel()]
+    leading = _leading_rows(starts, mask)
+    assert penalised != np.array_equal(leading, mask)
+    if penalised:
+        rows.append(np.column_stack([0.01 * c[leading].ravel() for c in columns]
+                                    + [np.zeros((2 * leading.sum(), 2))]))
+        values.append(np.zeros(2 * leading.sum()))
+    joint = np.linalg.lstsq(np.vstack(rows), np.concatenate(values), rcond=None)[0]
+    np.testing.assert_allclose(states[[0, 1, 3]], joint[:8].reshape(4, 2)[[0, 1, 3]],
+                               atol=1e-10)
+    np.testing.assert_array_equal(states[2], 0.0)
+    np.testing.assert_allclose(offset, joint[8:], atol=1e-10)
 
 
 def test_pnlss_reference_bla():

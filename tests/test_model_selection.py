@@ -74,6 +74,25 @@ def test_ranks_the_end_of_every_sequence():
     assert search.predict(u, sequence_id=sequence_id).shape == y.shape
 
 
+def test_ranks_the_training_records_from_their_own_states():
+    # With a state per record, the candidates simulate the records they were
+    # fitted on from those states, not from their mean.
+    u, y, sequence_id = _quadratic_system(n_samples=200, n_sequences=2)
+    y = y + np.repeat([0.4, -0.4], 200) * 0.6 ** np.tile(np.arange(200), 2)
+    search = HoldoutSearch(PNLSSRegressor(n_states=1, degree=2, max_iter=2, estimate_x0=True),
+                           validation_fractions=[0.9]).fit(u, y, sequence_id=sequence_id)
+    model = search.best_estimator_
+    assert model.x0_.shape == (2, 1)
+    rows = np.r_[20:200, 220:400]
+    own = model.predict(u, sequence_id=sequence_id, x0=model.x0_)
+    assert search.results_["holdout_rms"][0] == pytest.approx(
+        rms_error(y[rows], own[rows]), rel=1e-12)
+    # From the mean of the states, the decayed starts still differ by 1e-9.
+    mean = model.predict(u, sequence_id=sequence_id)
+    assert rms_error(y[rows], mean[rows]) != pytest.approx(rms_error(y[rows], own[rows]),
+                                                            rel=1e-12)
+
+
 class _DivergingModel:
     """Stands for a fitted candidate whose simulation diverges near the end."""
 

@@ -135,9 +135,22 @@ def test_each_sequence_has_its_own_initial_state(name, record):
     # Measured over random states 0-2: 0.008 to 0.029 (the BLA 0.092, the
     # mean of the two states 0.72; the output's standard deviation is 0.76).
     assert np.median(errors) < 0.05
-    # Other records start from zero.
-    np.testing.assert_array_equal(model.predict(u, sequence_id=sequence_id),
-                                  model.predict(u, sequence_id=sequence_id, x0=np.zeros(2)))
+    # Other records start from the mean of the fitted states.
+    np.testing.assert_array_equal(
+        model.predict(u, sequence_id=sequence_id),
+        model.predict(u, sequence_id=sequence_id, x0=model.x0_.mean(axis=0)))
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_a_sequence_without_fitted_rows_has_a_zero_initial_state(name, record):
+    # Shorter than n_transient, the middle record has no cost row: its state
+    # has nothing to fit and stays at the mean operating point.
+    u, y = record
+    sequence_id = np.repeat([0, 1, 2], [185, 30, 185])
+    model = FACTORIES[name](n_states=2, estimate_x0=True, n_transient=50).fit(
+        u, y, sequence_id=sequence_id)
+    assert model.x0_.shape == (3, 2)
+    np.testing.assert_array_equal(model.bla_.x0_[1], 0.0)
 
 
 def test_held_initial_state_of_a_bla_with_its_own_transient(record):

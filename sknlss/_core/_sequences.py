@@ -119,16 +119,31 @@ def part_before_holdout(U, Y, starts, fit_mask):
         The kept rows, C-contiguous.
     starts_part : ndarray of shape (n_kept_sequences + 1,)
         Boundaries of the kept parts; sequences without a fitted row are dropped.
+    kept : ndarray of int
+        Indices of the kept sequences.
     """
-    segments = []
-    for begin, end in zip(starts[:-1], starts[1:]):
+    segments, kept = [], []
+    for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
         fitted = np.flatnonzero(fit_mask[begin:end])
         if fitted.size:
             segments.append((begin, begin + fitted[-1] + 1))
+            kept.append(k)
     rows = np.concatenate([np.arange(begin, end) for begin, end in segments])
     lengths = [end - begin for begin, end in segments]
     starts_part = np.cumsum([0] + lengths).astype(np.int64)
-    return np.ascontiguousarray(U[rows]), np.ascontiguousarray(Y[rows]), starts_part
+    return (np.ascontiguousarray(U[rows]), np.ascontiguousarray(Y[rows]), starts_part,
+            np.array(kept, dtype=np.int64))
+
+
+def every_sequence(states, kept, n_sequences):
+    """The initial ``states`` of the ``kept`` sequences (of shape (n_states,)
+    for one) set among all ``n_sequences``, zero for the others; for one
+    sequence in all, ``states`` as they are."""
+    if n_sequences == 1:
+        return states
+    every = np.zeros((n_sequences, np.shape(states)[-1]))
+    every[kept] = np.reshape(states, (len(kept), -1))
+    return every
 
 
 def steady_state_rows(starts, n_prepend):

@@ -329,9 +329,11 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
     def _initial_states(self, x0, n_sequences):
         n_states = self.A_.shape[0]
         if x0 is None:
-            # The states of several fitted sequences belong to those records
-            # only (and cross-validation scores other records).
-            x0 = self.x0_ if self.x0_.ndim == 1 else np.zeros(n_states)
+            # The states of several fitted sequences belong to those records;
+            # another record (as cross-validation scores) starts from their
+            # mean, the state a record of these experiments starts from on
+            # average.
+            x0 = self.x0_ if self.x0_.ndim == 1 else self.x0_.mean(axis=0)
         with naming("x0"):
             x0 = np.asarray(x0, dtype=np.float64)
         if x0.shape not in ((n_states,), (n_sequences, n_states)):
@@ -356,10 +358,10 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Initial state in the model's (normalised) state coordinates; with
             one row per sequence, row ``k`` starts the ``k``-th sequence in the
             order of the rows of ``X`` (not in the sorted order of the labels).
-            ``None`` uses the fitted ``x0_`` (zero unless it was estimated,
-            and zero when ``x0_`` holds one state per fitted sequence: pass
-            ``x0=model.x0_`` to simulate those sequences); a nonlinear model
-            fitted with ``period`` and ``n_transient`` then
+            ``None`` uses the fitted ``x0_`` (zero unless it was estimated;
+            the mean of its rows when it holds one state per fitted sequence:
+            pass ``x0=model.x0_`` to simulate those sequences from their own);
+            a nonlinear model fitted with ``period`` and ``n_transient`` then
             starts every sequence whose input repeats with the period in its
             periodic steady state.
         return_states : bool, default=False

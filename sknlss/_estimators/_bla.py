@@ -103,7 +103,7 @@ class LinearFit:
     simulation_error : float
         Largest normalised RMS error over the outputs of the model's
         simulation of its estimation rows, from the least-squares initial
-        state (inf for a diverging simulation); above ``_MEAN_LEVEL`` the
+        state shared by all sequences (inf for a diverging simulation); above ``_MEAN_LEVEL`` the
         model is worse than the output's mean.
     """
 
@@ -348,13 +348,17 @@ def _parametric(estimate, U, Y, starts, mask, params):
                                         verbose=params["verbose"])
         n_iter, loss_history = result.n_iter, result.loss_history
     A, B, C, D, hsv = balanced_realization(A, B, C, D)
-    # The least-squares initial state checks every model; the fit keeps it
-    # only with estimate_x0.
-    x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask,
-                                               per_sequence=params["estimate_x0"])
+    # The least-squares initial state, one for all sequences, checks every
+    # model (a state per sequence would let a nearly integrating model absorb
+    # each record's drift and win); the fit keeps one per sequence, and only
+    # with estimate_x0.
+    x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask)
     error = _simulation_nrmse(A, B, C, D, U, Y, starts, mask, x0, output_offset)
     if not params["estimate_x0"]:
         x0, output_offset = np.zeros(n), np.zeros(n_y)
+    elif len(starts) > 2:
+        x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask,
+                                                   per_sequence=True)
     return LinearFit(A, B, C, D, x0, output_offset, hsv, freqs, G, estimate.noise_variance,
                      estimate.total_variance, ss_frf(A, B, C, D, freqs), n_iter,
                      loss_history, error)
@@ -521,8 +525,8 @@ class BLAEstimator(_BaseStateSpace):
         Feed-through matrix.
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
         Initial state, zero unless ``estimate_x0``; one per sequence when the
-        model was fitted on several (``predict`` starts other records from
-        zero then).
+        model was fitted on several (``predict`` starts any record from their
+        mean then, unless given ``x0``, e.g. ``x0_`` itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Correction of the output offset estimated with ``x0_`` (normalised
         units, zero unless ``estimate_x0``): the mean of a record that does not

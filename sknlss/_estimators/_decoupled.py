@@ -124,8 +124,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state of every sequence (forwarded to the
         PNLSS model) and a constant output offset with it
-        (``output_offset_``); ``predict`` then starts from ``x0_``. A long
-        ``n_transient`` holds it (see ``n_transient``).
+        (``output_offset_``); ``predict`` then starts from ``x0_`` (their
+        mean, for several). A long ``n_transient`` holds it (see
+        ``n_transient``).
     pnlss : PNLSSRegressor, default=None
         Template of the PNLSS model that is decoupled; it receives
         ``n_states``, ``input_delay``, ``estimate_x0``, ``period``, ``cost``,
@@ -243,8 +244,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``extrapolation`` says.
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
         Initial state (zero unless ``estimate_x0``), one per sequence when
-        the model was fitted on several; ``predict`` starts other records
-        from zero then.
+        the model was fitted on several; ``predict`` starts any record from
+        their mean then, unless given ``x0`` (e.g. ``x0_`` itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Constant output offset estimated with ``x0_`` (normalised units, zero
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to

@@ -320,8 +320,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state of every sequence, and a constant output
         offset with it (``output_offset_``); ``predict`` then starts from the
-        fitted ``x0_``. A long ``n_transient`` holds it (see
-        ``n_transient``).
+        fitted ``x0_`` (their mean, for several). A long ``n_transient``
+        holds it (see ``n_transient``).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then
@@ -444,8 +444,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         (``extrapolation``, with ``"auto"`` resolved for ``basis_``).
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
         Initial state (zero unless ``estimate_x0``), one per sequence when
-        the model was fitted on several; ``predict`` starts other records
-        from zero then.
+        the model was fitted on several; ``predict`` starts any record from
+        their mean then, unless given ``x0`` (e.g. ``x0_`` itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Constant output offset estimated with ``x0_`` (normalised units, zero
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to

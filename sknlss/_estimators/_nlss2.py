@@ -24,7 +24,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from threadpoolctl import threadpool_limits
 
 from .._core._model import parameter_count
-from .._core._sequences import part_before_holdout
+from .._core._sequences import every_sequence, part_before_holdout
 from .._linear._state_estimation import estimate_states
 from .._terms._network import ACTIVATIONS, NetworkTerms
 from .._validation import Integers
@@ -117,7 +117,8 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
     values.update(_fit_networks(states, U_fit, Y_fit, starts_fit, linear, n_neurons,
                                 activation, seed))
     if model.estimate_x0:
-        values["x0"] = states[starts_fit[:-1]]
+        values["x0"] = every_sequence(states[starts_fit[:-1]], context["kept_fit"],
+                                      model.n_sequences)
     return model.pack(values)
 
 
@@ -279,8 +280,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     g_output_biases_ : ndarray of shape (n_outputs,)
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
         Initial state (zero unless ``estimate_x0``), one per sequence when
-        the model was fitted on several; ``predict`` starts other records
-        from zero then.
+        the model was fitted on several; ``predict`` starts any record from
+        their mean then, unless given ``x0`` (e.g. ``x0_`` itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Zero: the biases of the output networks, ``g_output_biases_``, hold
         the constant output offset that the other estimators estimate with
@@ -482,8 +483,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     def _prepare_starts(self, context):
         problem, rows = context["problem"], context["rows"]
         fit_mask = rows.fit_rows[rows.original]
-        context["U_fit"], context["Y_fit"], context["starts_fit"] = part_before_holdout(
-            context["U"], context["Y"], context["starts"], fit_mask)
+        (context["U_fit"], context["Y_fit"], context["starts_fit"],
+         context["kept_fit"]) = part_before_holdout(context["U"], context["Y"],
+                                                    context["starts"], fit_mask)
         if self.alpha == "auto":
             # The same network seed for every candidate (paper §4.2).
             seed = check_random_state(self.random_state).randint(np.iinfo(np.int32).max)

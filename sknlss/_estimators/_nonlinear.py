@@ -39,8 +39,9 @@ from .._core._memory import check_memory
 from .._core._model import StateSpaceModel, parameter_count
 from .._core._multistart import START_ERRORS, fit_from, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
-from .._core._sequences import (PERIODIC_TOLERANCE, holdout_masks, part_before_holdout,
-                                periodic_sequences, steady_state_rows, transient_mask)
+from .._core._sequences import (PERIODIC_TOLERANCE, every_sequence, holdout_masks,
+                                part_before_holdout, periodic_sequences, steady_state_rows,
+                                transient_mask)
 from .._linear._realization import simulate_linear, spectral_radius
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import DataWarning, LinearFallbackWarning, warn_at_caller
@@ -243,7 +244,11 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                       input_delay=self.input_delay)
         if params["period"] is None:
             params["period"] = self.period
-        linear = fit_linear_model(*part_before_holdout(U, Y, starts, fit_mask), params)
+        *part, kept = part_before_holdout(U, Y, starts, fit_mask)
+        linear = fit_linear_model(*part, params)
+        if self.estimate_x0:
+            # A sequence without a fitted row has no state of its own to fit.
+            linear.x0 = every_sequence(linear.x0, kept, len(starts) - 1)
         self.bla_ = fitted_bla(params, linear, normalisation_of(self))
         return {"A": linear.A, "B": linear.B, "C": linear.C, "D": linear.D, "x0": linear.x0,
                 "y0": linear.output_offset}

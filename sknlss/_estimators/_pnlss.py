@@ -68,8 +68,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     estimate_x0 : bool, default=False
         Estimate the initial state of every sequence (PNLSS-I), and a
         constant output offset with it (``output_offset_``); ``predict``
-        then starts from the fitted ``x0_``. A long ``n_transient`` holds
-        it (see ``n_transient``).
+        then starts from the fitted ``x0_`` (their mean, for several). A
+        long ``n_transient`` holds it (see ``n_transient``).
     center : bool, default=True
         Expand the polynomials around the mean of the signals (zero mean, unit
         standard deviation) instead of around the signals' own zero (only
@@ -202,8 +202,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         says.
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
         Initial state (zero unless ``estimate_x0``), one per sequence when
-        the model was fitted on several; ``predict`` starts other records
-        from zero then.
+        the model was fitted on several; ``predict`` starts any record from
+        their mean then, unless given ``x0`` (e.g. ``x0_`` itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Constant output offset estimated with ``x0_`` (normalised units, zero
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to

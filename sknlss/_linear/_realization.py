@@ -412,9 +412,8 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask, *, per_sequence=False
     x0 : ndarray of shape (n,), or (n_sequences, n) with ``per_sequence`` and
         several sequences
     offset : ndarray of shape (n_y,)
-        One output offset for all sequences.
-        Output offset ``d``. Both are zero for a model whose simulation
-        diverges on the record.
+        Output offset ``d``, one for all sequences. Both are zero for a
+        model whose simulation diverges on the record.
     """
     n, n_y, n_seq = A.shape[0], C.shape[0], len(starts) - 1
     zeros = np.zeros((n_seq, n))
@@ -427,37 +426,81 @@ def estimate_initial_state(A, B, C, D, U, Y, starts, mask, *, per_sequence=False
         free, _, free_diverged = simulate_linear(A, B, C, D, no_input, starts, e)
         diverged |= free_diverged
         free_responses.append(free)
-    shape = (n_seq, n) if per_sequence and n_seq > 1 else (n,)
+    per_sequence = per_sequence and n_seq > 1
     if diverged:
         # No initial state fits a model that diverges on the record.
-        return np.zeros(shape), np.zeros(n_y)
-    if len(shape) == 2:
-        # The free response from e_i in one sequence, zero in the others.
-        sequence_of_row = np.repeat(np.arange(n_seq), np.diff(starts))
-        free_responses = [np.where((sequence_of_row == k)[:, None], free, 0.0)
-                          for k in range(n_seq) for free in free_responses]
-    columns = [free[mask].ravel() for free in free_responses]
-    n_rows = int(mask.sum())
-    constant = np.tile(np.eye(n_y), (n_rows, 1))
-    Phi = np.column_stack(columns + [constant])
-    target = (Y - forced)[mask].ravel()
+        return np.zeros((n_seq, n) if per_sequence else n), np.zeros(n_y)
+    target = Y - forced
     leading = _leading_rows(starts, mask)
-    if not np.array_equal(leading, mask):
-        # The cost rows skip the start of a sequence (see the docstring): a
-        # direction that has decayed to a fraction f of its response from the
-        # start keeps f^2 / (f^2 + weight^2) of its fit.
-        reference = np.column_stack([free[leading].ravel() for free in free_responses])
-        penalty = np.hstack([_SKIPPED_START_WEIGHT * reference,
-                             np.zeros((reference.shape[0], n_y))])
-        Phi = np.vstack([Phi, penalty])
-        target = np.concatenate([target, np.zeros(reference.shape[0])])
+    # The cost rows skip the start of a sequence (see the docstring): a
+    # direction that has decayed to a fraction f of its response from the
+    # start keeps f^2 / (f^2 + weight^2) of its fit.
+    penalised = not np.array_equal(leading, mask)
+    if per_sequence:
+        return _states_per_sequence(np.stack(free_responses, axis=-1), target, starts, mask,
+                                    leading if penalised else None)
+    Phi, target = _state_rows(np.stack(free_responses, axis=-1), target, mask,
+                              leading if penalised else None)
     # A direction of the state whose free response on the cost rows is below
     # _STATE_RCOND of the largest (usually the offset's) is not determined by
     # them: the minimum-norm solution leaves it out instead of fitting the
     # noise with a huge state.
     sol = np.linalg.lstsq(Phi, target, rcond=_STATE_RCOND)[0]
-    n_x0 = len(free_responses)
-    return sol[:n_x0].reshape(shape), sol[n_x0:]
+    return sol[:n], sol[n:]
+
+
+def _state_rows(free, target, mask, leading):
+    """The least-squares rows of :func:`estimate_initial_state` for one state:
+    the free responses ``free`` (n_samples, n_y, n) on the rows ``mask``, a
+    constant per output, and the penalty on the rows ``leading`` (None for
+    none); and the ``target`` on them."""
+    n, n_y = free.shape[2], free.shape[1]
+    Phi = np.hstack([free[mask].reshape(-1, n), np.tile(np.eye(n_y), (int(mask.sum()), 1))])
+    target = target[mask].ravel()
+    if leading is not None:
+        reference = free[leading].reshape(-1, n)
+        Phi = np.vstack([Phi, np.hstack([_SKIPPED_START_WEIGHT * reference,
+                                         np.zeros((reference.shape[0], n_y))])])
+        target = np.concatenate([target, np.zeros(reference.shape[0])])
+    return Phi, target
+
+
+def _states_per_sequence(free, target, starts, mask, leading):
+    """The least squares of :func:`estimate_initial_state` with one state per
+    sequence, solved sequence by sequence.
+
+    Each state moves only its own sequence's rows: the states are eliminated
+    block by block (a truncated SVD each), the offset shared by all
+    sequences is fitted to what no state explains, and each state then to
+    what the offset leaves. The cost grows linearly with the number of
+    sequences, where the joint least squares has a column per state.
+    Directions below ``_STATE_RCOND`` of a bound on the joint matrix's
+    largest singular value are left out, as there.
+    """
+    n, n_y = free.shape[2], free.shape[1]
+    blocks = []
+    for begin, end in zip(starts[:-1], starts[1:]):
+        rows = slice(begin, end)
+        Phi, t = _state_rows(free[rows], target[rows], mask[rows],
+                             None if leading is None else leading[rows])
+        U, S, Vt = np.linalg.svd(Phi[:, :n], full_matrices=False)
+        blocks.append((Phi[:, n:], t, U, S, Vt))
+    # The joint matrix is the states' block diagonal beside the offset's
+    # columns (the square root of the cost rows' count in norm).
+    bound = np.sqrt(max((S[0] ** 2 for *_, S, _ in blocks if S.size), default=0.0)
+                    + mask.sum())
+    kept = [S > _STATE_RCOND * bound for *_, S, _ in blocks]
+
+    def unexplained(U, keep, values):
+        return values - U[:, keep] @ (U[:, keep].T @ values)
+
+    offset = np.linalg.lstsq(
+        np.vstack([unexplained(U, keep, E) for (E, _, U, _, _), keep in zip(blocks, kept)]),
+        np.concatenate([unexplained(U, keep, t) for (_, t, U, _, _), keep in zip(blocks, kept)]),
+        rcond=_STATE_RCOND)[0]
+    states = np.array([Vt[keep].T @ ((U[:, keep].T @ (t - E @ offset)) / S[keep])
+                       for (E, t, U, S, Vt), keep in zip(blocks, kept)])
+    return states, offset
 
 
 def _leading_rows(starts, mask):
