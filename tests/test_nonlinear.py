@@ -31,6 +31,7 @@ from sknlss._estimators._nonlinear import (
     escapes_when_doubled,
     stays_bounded,
 )
+from sknlss._linear._realization import simulate_linear
 from sknlss._terms._polynomial import PolynomialTerms, monomial_exponents
 from sknlss.metrics import rms_error
 from sknlss.signals import multisine
@@ -390,7 +391,7 @@ def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
     # record, which is also what a mode that does not decay takes.
     starts = np.array([0, 1000])
     settling_time = _settling_time(_linear_model(np.diag([radius, 0.0])),
-                                   np.ones((1000, 1)), starts)
+                                   np.ones((1000, 1)), np.zeros((1000, 1)), starts)
 
     def cost_transient(**params):
         model = PNLSSRegressor(2, **params)
@@ -415,21 +416,32 @@ def _linear_model(A, B=None, C=None):
 def test_a_mode_that_does_not_show_in_the_output_does_not_settle():
     # A slow mode that the input barely drives, or that the output barely
     # sees, is not waited for: 44 samples for the mode at 0.9, not the 4603
-    # of the mode at 0.999.
+    # of the mode at 0.999, unless the record starts with it.
     U = np.random.default_rng(0).standard_normal((2000, 1))
     starts = np.array([0, 2000])
+
+    def settling_time(linear, x0=(0.0, 0.0)):
+        # On the model's own output from x0, the output scaled to unit size.
+        Y = simulate_linear(*(linear[name] for name in "ABCD"), U, starts,
+                            np.array([x0]))[0]
+        scale = np.std(Y)
+        unit = dict(linear, C=linear["C"] / scale, D=linear["D"] / scale)
+        return _settling_time(unit, U, Y / scale, starts)
+
     A = np.diag([0.9, 0.999])
-    assert _settling_time(_linear_model(A), U, starts) == 4603
-    assert _settling_time(_linear_model(A, C=np.array([[1.0, 1e-4]])), U, starts) == 44
-    assert _settling_time(_linear_model(A, B=np.array([[1.0], [1e-5]])), U, starts) == 44
+    weak_input = _linear_model(A, B=np.array([[1.0], [1e-5]]))
+    assert settling_time(_linear_model(A)) == 4603
+    assert settling_time(_linear_model(A, C=np.array([[1.0, 1e-4]]))) == 44
+    assert settling_time(weak_input) == 44
     # In any coordinates.
     T = np.array([[1.0, 2.0], [-1.0, 0.5]])
     similar = _linear_model(T @ A @ np.linalg.inv(T), B=T @ np.array([[1.0], [1e-5]]),
                             C=np.array([[1.0, 1e-4]]) @ np.linalg.inv(T))
-    assert _settling_time(similar, U, starts) == 44
+    assert settling_time(similar) == 44
+    # A record that starts with the slow mode shows it there.
+    assert settling_time(weak_input, x0=(0.0, 2.0)) == 4603
     # A mode that does not decay is waited for whatever its size.
-    assert _settling_time(_linear_model(np.diag([0.9, 1.0]), C=np.array([[1.0, 1e-6]])),
-                          U, starts) == np.inf
+    assert settling_time(_linear_model(np.diag([0.9, 1.0]), C=np.array([[1.0, 1e-6]]))) == np.inf
 
 
 def test_spurious_poles_of_an_over_ordered_model_leave_the_transient_alone():

@@ -42,7 +42,7 @@ from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import (PERIODIC_TOLERANCE, every_sequence, holdout_masks,
                                 part_before_holdout, periodic_sequences, steady_state_rows,
                                 transient_mask)
-from .._linear._realization import simulate_linear, spectral_radius
+from .._linear._realization import estimate_initial_state, simulate_linear, spectral_radius
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import DataWarning, LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
@@ -59,8 +59,8 @@ _AUTO_SHARES = (0.25, 0.3, 0.35, 0.275, 0.325)
 _MIN_SPLIT_LENGTH = 100
 #: Without an estimated initial state, the cost skips the samples in which the
 #: slowest mode of the linear model that shows in its output (by at least this
-#: fraction of the output's scale) decays to this fraction, at most this share
-#: of each sequence.
+#: fraction of the output's scale, see ``_settling_time``) decays to this
+#: fraction, at most this share of each sequence.
 _SETTLED = 1e-2
 _MAX_TRANSIENT_SHARE = 0.1
 #: Relative margin above the linear start's error on the cost rows within which
@@ -457,7 +457,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                             validation_fraction=self._sequence_fractions(max(shares), starts),
                             steady_state_period=self.period)
         linear = self._linear_start(U, Y, starts, bla_rows.fit_rows[bla_rows.original])
-        settling_time = _settling_time(linear, U, starts)
+        settling_time = _settling_time(linear, U, Y, starts)
         self.fit_transient_ = self._cost_transient(settling_time, starts)
         rows = {share: fit_rows(U, Y, starts, n_transient=self._sequence_transients(starts),
                                 validation_fraction=self._sequence_fractions(share, starts),
@@ -752,22 +752,24 @@ def ranged_prediction_terms(model, theta, U, starts, extrapolation):
                                         **_CONTINUATIONS[extrapolation])
 
 
-def _settling_time(linear, U, starts):
+def _settling_time(linear, U, Y, starts):
     """Samples over which the slowest mode of the ``linear`` model (keyed by
     block name) that shows in its output decays to ``_SETTLED`` of its size;
     inf when a mode does not decay.
 
-    A mode shows when, simulated from rest on the input ``U``, its part of an
-    output reaches ``_SETTLED`` of that output's scale in RMS: a record starts
-    from such a typical state. An over-ordered model has slow poles that
-    barely reach the output, and the settling time of such a pole would
-    leave a tenth of the record out of the cost for nothing.
+    A mode shows when its part of an output reaches ``_SETTLED`` of that
+    output's scale: in RMS, simulated from rest on the input ``U``, or at the
+    start of a sequence, from the least-squares initial state that fits the
+    output ``Y``. An over-ordered model has slow poles that barely reach the
+    output, and the settling time of such a pole would leave a tenth of the
+    record out of the cost for nothing; a slow mode that the input barely
+    drives but a record starts with shows at that start.
     """
     A = linear["A"]
     radius = spectral_radius(A)
     if radius >= 1.0:
         return np.inf
-    poles, shows = _modes_that_show(linear, U, starts)
+    poles, shows = _modes_that_show(linear, U, Y, starts)
     moduli = np.abs(poles)
     if not shows.any() or radius == 0.0:
         return 0
@@ -777,23 +779,30 @@ def _settling_time(linear, U, starts):
     return int(np.ceil(np.log(_SETTLED) / np.log(slowest))) if slowest > 0.0 else 0
 
 
-def _modes_that_show(linear, U, starts):
+def _modes_that_show(linear, U, Y, starts):
     """The eigenvalues of ``linear["A"]`` and which of them have a part in an
-    output of at least ``_SETTLED`` in RMS, simulated from rest on ``U``
-    (normalised units: each output's scale is 1). All of them when the modes
-    cannot be told apart (defective ``A``) or the simulation diverges."""
-    A, C = linear["A"], linear["C"]
+    output of at least ``_SETTLED`` (normalised units: each output's scale is
+    1), in RMS simulated from rest on ``U`` or at the start of a sequence from
+    its least-squares initial state. All of them when the modes cannot be told
+    apart (defective ``A``) or the simulation diverges."""
+    A, B, C, D = (linear[name] for name in "ABCD")
     everything = np.ones(A.shape[0], dtype=bool)
-    states, diverged = simulate_linear(A, linear["B"], C, linear["D"], U, starts,
+    states, diverged = simulate_linear(A, B, C, D, U, starts,
                                        np.zeros((len(starts) - 1, A.shape[0])))[1:]
     poles, V = np.linalg.eig(A)
     if diverged:
         return poles, everything
+    starting = np.atleast_2d(estimate_initial_state(
+        A, B, C, D, U, Y, starts, np.ones(len(U), dtype=bool), per_sequence=True)[0])
     try:
         modal = np.linalg.solve(V, states.T)
+        modal_start = np.linalg.solve(V, starting.T)
     except np.linalg.LinAlgError:
         return poles, everything
-    size = np.max(np.abs(C @ V), axis=0) * np.sqrt(np.mean(np.abs(modal) ** 2, axis=1))
+    gain = np.max(np.abs(C @ V), axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        size = np.maximum(gain * np.sqrt(np.mean(np.abs(modal) ** 2, axis=1)),
+                          gain * np.max(np.abs(modal_start), axis=1))
     # NaN (an overflow of a nearly defective A) counts as showing.
     return poles, ~(size < _SETTLED)
 

@@ -494,10 +494,14 @@ def _states_per_sequence(free, target, starts, mask, leading):
     def unexplained(U, keep, values):
         return values - U[:, keep] @ (U[:, keep].T @ values)
 
+    left = np.vstack([unexplained(U, keep, E) for (E, _, U, _, _), keep in zip(blocks, kept)])
+    # The same absolute threshold: an offset that the states explain (a mode
+    # at 1 that the output sees) is left to them, as in the joint problem.
+    largest = np.linalg.norm(left, 2)
     offset = np.linalg.lstsq(
-        np.vstack([unexplained(U, keep, E) for (E, _, U, _, _), keep in zip(blocks, kept)]),
+        left,
         np.concatenate([unexplained(U, keep, t) for (_, t, U, _, _), keep in zip(blocks, kept)]),
-        rcond=_STATE_RCOND)[0]
+        rcond=min(1.0, _STATE_RCOND * bound / largest) if largest > 0 else None)[0]
     states = np.array([Vt[keep].T @ ((U[:, keep].T @ (t - E @ offset)) / S[keep])
                        for (E, t, U, S, Vt), keep in zip(blocks, kept)])
     return states, offset
