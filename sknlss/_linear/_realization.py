@@ -495,13 +495,15 @@ def _states_per_sequence(free, target, starts, mask, leading):
         return values - U[:, keep] @ (U[:, keep].T @ values)
 
     left = np.vstack([unexplained(U, keep, E) for (E, _, U, _, _), keep in zip(blocks, kept)])
+    right = np.concatenate([unexplained(U, keep, t)
+                            for (_, t, U, _, _), keep in zip(blocks, kept)])
     # The same absolute threshold: an offset that the states explain (a mode
     # at 1 that the output sees) is left to them, as in the joint problem.
     largest = np.linalg.norm(left, 2)
-    offset = np.linalg.lstsq(
-        left,
-        np.concatenate([unexplained(U, keep, t) for (_, t, U, _, _), keep in zip(blocks, kept)]),
-        rcond=min(1.0, _STATE_RCOND * bound / largest) if largest > 0 else None)[0]
+    if largest > _STATE_RCOND * bound:
+        offset = np.linalg.lstsq(left, right, rcond=_STATE_RCOND * bound / largest)[0]
+    else:
+        offset = np.zeros(left.shape[1])
     states = np.array([Vt[keep].T @ ((U[:, keep].T @ (t - E @ offset)) / S[keep])
                        for (E, t, U, S, Vt), keep in zip(blocks, kept)])
     return states, offset
