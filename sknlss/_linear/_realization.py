@@ -477,35 +477,37 @@ def _states_per_sequence(free, target, starts, mask, leading):
     Directions below ``_STATE_RCOND`` of a bound on the joint matrix's
     largest singular value are left out, as there.
     """
-    n, n_y = free.shape[2], free.shape[1]
-    blocks = []
+    n = free.shape[2]
+    factors, offset_columns, targets = [], [], []
     for begin, end in zip(starts[:-1], starts[1:]):
         rows = slice(begin, end)
         Phi, t = _state_rows(free[rows], target[rows], mask[rows],
                              None if leading is None else leading[rows])
-        U, S, Vt = np.linalg.svd(Phi[:, :n], full_matrices=False)
-        blocks.append((Phi[:, n:], t, U, S, Vt))
+        factors.append(np.linalg.svd(Phi[:, :n], full_matrices=False))
+        offset_columns.append(Phi[:, n:])
+        targets.append(t)
     # The joint matrix is the states' block diagonal beside the offset's
     # columns (the square root of the cost rows' count in norm).
-    bound = np.sqrt(max((S[0] ** 2 for *_, S, _ in blocks if S.size), default=0.0)
-                    + mask.sum())
-    kept = [S > _STATE_RCOND * bound for *_, S, _ in blocks]
+    threshold = _STATE_RCOND * np.sqrt(
+        max((S[0] ** 2 for _, S, _ in factors if S.size), default=0.0) + mask.sum())
+    # Each block's directions above the threshold.
+    bases = [(U[:, S > threshold], S[S > threshold], Vt[S > threshold])
+             for U, S, Vt in factors]
 
-    def unexplained(U, keep, values):
-        return values - U[:, keep] @ (U[:, keep].T @ values)
+    def unexplained(U, values):
+        return values - U @ (U.T @ values)
 
-    left = np.vstack([unexplained(U, keep, E) for (E, _, U, _, _), keep in zip(blocks, kept)])
-    right = np.concatenate([unexplained(U, keep, t)
-                            for (_, t, U, _, _), keep in zip(blocks, kept)])
+    left = np.vstack([unexplained(U, E) for (U, _, _), E in zip(bases, offset_columns)])
+    right = np.concatenate([unexplained(U, t) for (U, _, _), t in zip(bases, targets)])
     # The same absolute threshold: an offset that the states explain (a mode
     # at 1 that the output sees) is left to them, as in the joint problem.
     largest = np.linalg.norm(left, 2)
-    if largest > _STATE_RCOND * bound:
-        offset = np.linalg.lstsq(left, right, rcond=_STATE_RCOND * bound / largest)[0]
+    if largest > threshold:
+        offset = np.linalg.lstsq(left, right, rcond=threshold / largest)[0]
     else:
         offset = np.zeros(left.shape[1])
-    states = np.array([Vt[keep].T @ ((U[:, keep].T @ (t - E @ offset)) / S[keep])
-                       for (E, t, U, S, Vt), keep in zip(blocks, kept)])
+    states = np.array([Vt.T @ ((U.T @ (t - E @ offset)) / S)
+                       for (U, S, Vt), E, t in zip(bases, offset_columns, targets)])
     return states, offset
 
 
