@@ -799,10 +799,13 @@ def _modes_that_show(linear, U, Y, starts):
         modal_start = np.linalg.solve(V, starting.T)
     except np.linalg.LinAlgError:
         return poles, everything
-    gain = np.max(np.abs(C @ V), axis=0)
+    # A complex pair reaches the output as twice the real part of either
+    # mode's term (2 Re(c v xi)), not as the modulus of one.
+    part_gain = (C @ V) * np.where(poles.imag != 0.0, 2.0, 1.0)
     with np.errstate(over="ignore", invalid="ignore"):
-        size = np.maximum(gain * np.sqrt(np.mean(np.abs(modal) ** 2, axis=1)),
-                          gain * np.max(np.abs(modal_start), axis=1))
+        driven = np.sqrt(np.mean(np.real(part_gain[:, :, None] * modal) ** 2, axis=2))
+        at_start = np.max(np.abs(part_gain[:, :, None] * modal_start), axis=2)
+        size = np.max(np.maximum(driven, at_start), axis=0)
     # NaN (an overflow of a nearly defective A) counts as showing.
     return poles, ~(size < _SETTLED)
 
