@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from sknlss.datasets import (fetch_cascaded_tanks, fetch_silverbox, load_cascaded_tanks,
-                             make_cascaded_tanks, make_pnlss_reference)
+                             make_bouc_wen, make_cascaded_tanks, make_duffing,
+                             make_pnlss_reference)
 from sknlss.datasets import _cascaded_tanks, _fetch, _silverbox
 
 
@@ -499,3 +500,12 @@ def test_pnlss_reference_noise_level():
 def test_pnlss_reference_bad_arguments(kwargs, name):
     with pytest.raises(ValueError, match=f"'{name}' parameter"):
         make_pnlss_reference(**kwargs)
+
+
+@pytest.mark.parametrize("make, input_rms", [(make_duffing, 1e4), (make_bouc_wen, 3e5)])
+def test_an_oscillator_that_overflows_is_refused(make, input_rms):
+    # Far beyond the documented amplitudes the fixed-step integration is
+    # unstable: an error naming the amplitude, not records of NaN.
+    with pytest.raises(ValueError, match=r"overflows at input_rms=.*Lower input_rms or raise "
+                                         r"n_substeps"):
+        make(256, 256, input_rms=input_rms, random_state=0)

@@ -936,6 +936,37 @@ def test_a_transient_that_leaves_nothing_to_fit(Estimator, validation_fraction, 
                   validation_fraction=validation_fraction).fit(X, y[:, 0])
 
 
+@pytest.mark.parametrize("Estimator", [PNLSSRegressor, NLSS2Regressor, NLLFRRegressor,
+                                       DecoupledPNLSS])
+def test_messages_of_the_linear_start_name_the_rows_of_X_and_the_hold_out(Estimator):
+    # The linear start is fitted on every sequence cut before its held-out
+    # end; its messages name the rows of the user's X, and what the hold-out
+    # or the delay leaves when they are the likely cause.
+    X, y = _clean_record(16, 600, 1, 1)
+    y = y[:, 0]
+    one_sample = np.r_[np.zeros(300, int), 1, 2 * np.ones(299, int)]
+    with pytest.raises(ValueError, match=r"sequence of rows 300 to 300 \(sequence_id\) has 1 "):
+        Estimator(n_states=2).fit(X, y, sequence_id=one_sample)
+    with pytest.warns(UserWarning, match=r"variance estimate .*rows 597 to 599\)"):
+        Estimator(n_states=2, n_init=1, max_iter=1).fit(
+            X, y, sequence_id=np.r_[np.zeros(597, int), np.ones(3, int)])
+    with pytest.raises(ValueError, match=r"validation_fraction=0.99 leaves 6 of the 600 "):
+        Estimator(n_states=2, validation_fraction=0.99).fit(X, y)
+    with pytest.raises(ValueError, match=r"input_delay=\[590\] is not shorter than a sequence "
+                                         r"of 390 .* validation_fraction='auto' leaves 390 of "):
+        Estimator(n_states=2, input_delay=590).fit(X, y)
+
+
+def test_inputs_in_any_memory_layout_give_the_same_fit():
+    # Column sums in one order whatever the layout: a C- and a Fortran-ordered
+    # copy of several input columns (a DataFrame holds the latter) once gave
+    # offsets a bit apart, which NLSS2's search amplified to a different model.
+    X, y = _clean_record(17, 400, 3, 1)
+    fits = [BLAEstimator(n_states=2).fit(Z, y[:, 0]) for Z in (X, np.asfortranarray(X))]
+    for name in ("u_offset_", "u_scale_", "A_", "B_"):
+        np.testing.assert_array_equal(getattr(fits[0], name), getattr(fits[1], name))
+
+
 def test_booleans_are_not_integers():
     X, y = _clean_record(14, 60, 1, 1)
     for estimator, param in [(PNLSSRegressor(n_states=True), "n_states"),

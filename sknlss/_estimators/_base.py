@@ -101,11 +101,11 @@ def _input_delays(input_delay, n_inputs, starts):
             "input_delay must be a non-negative integer, or one per input column "
             f"({n_inputs}); got {input_delay!r}.")
     delay = delay.astype(np.int64)
-    _check_delay_fits(delay, starts)
+    check_delay_fits(delay, starts)
     return delay
 
 
-def _check_delay_fits(delay, starts):
+def check_delay_fits(delay, starts):
     """Refuse sequences whose every sample would see an unmeasured input."""
     shortest = int(np.min(np.diff(starts)))
     if np.max(delay, initial=0) >= shortest:
@@ -120,10 +120,14 @@ def _offset_and_scale(values, argument, what):
     The statistics are computed on the values divided by their
     :func:`binary_magnitude`, so that the squares of values beyond 1e154 cannot
     overflow. A constant column is a ValueError naming ``argument`` (``what``
-    names its columns).
+    names its columns). Each column is summed as one contiguous run, whatever
+    the memory layout of ``values``: a C-ordered array of several columns
+    would otherwise be summed row by row, and its statistics would differ in
+    the last bit from those of the same values in Fortran order (a DataFrame's
+    array), which some fits amplify.
     """
     magnitude = binary_magnitude(values)
-    scaled = values / magnitude
+    scaled = np.asfortranarray(values / magnitude)
     scale = scaled.std(axis=0)
     constant = np.flatnonzero(~(scale > _CONSTANT * np.abs(scaled).max(axis=0)))
     if constant.size:
@@ -290,7 +294,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
     def _model_input(self, X, starts):
         """The input the model sees: ``X`` normalised, then delayed (sequences
         not longer than the delay refused)."""
-        _check_delay_fits(self.input_delay_, starts)
+        check_delay_fits(self.input_delay_, starts)
         return self._delayed(_normalised(X, self.u_offset_, self.u_scale_), starts)
 
     def _delayed(self, U, starts):

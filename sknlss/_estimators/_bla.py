@@ -124,16 +124,18 @@ class LinearFit:
     simulation_error: float
 
 
-def _span(starts, k):
-    """The rows of sequence ``k``, for messages."""
-    return f"{starts[k]} to {starts[k + 1] - 1}"
+def _span(starts, k, first_rows=None):
+    """The rows of sequence ``k``, for messages: in the user's ``X`` when
+    ``first_rows`` gives the row of ``X`` at which every sequence starts."""
+    begin = starts[k] if first_rows is None else first_rows[k]
+    return f"{begin} to {begin + starts[k + 1] - starts[k] - 1}"
 
 
-def _rows(starts, k):
-    """How an error names sequence ``k``."""
-    if len(starts) == 2:
+def _rows(starts, k, first_rows=None):
+    """How an error names sequence ``k`` (see :func:`_span`)."""
+    if len(starts) == 2 and first_rows is None:
         return "The record (X, y)"
-    return f"The sequence of rows {_span(starts, k)} (sequence_id)"
+    return f"The sequence of rows {_span(starts, k, first_rows)} (sequence_id)"
 
 
 def _frf_method(params):
@@ -142,10 +144,11 @@ def _frf_method(params):
     return params["method"]
 
 
-def _nonparametric(U, Y, starts, params):
+def _nonparametric(U, Y, starts, params, first_rows=None):
     """The nonparametric estimates to fit: the robust method's, or the LPM's
     on the bins whose window holds at least 1e-3 and 1e-2 of the largest
-    window's input power (see :func:`_fit_linear_model`)."""
+    window's input power (see :func:`_fit_linear_model`); ``first_rows`` as
+    in :func:`_span`."""
     period, n_transient = params["period"], params["n_transient"]
     if _frf_method(params) == "robust":
         if period is None:
@@ -156,7 +159,7 @@ def _nonparametric(U, Y, starts, params):
     if lengths.min() - n_transient < _LPM_MIN_SAMPLES:
         k = int(np.argmin(lengths))
         raise ValueError(
-            f"{_rows(starts, k)} has {lengths[k]} sample(s), "
+            f"{_rows(starts, k, first_rows)} has {lengths[k]} sample(s), "
             f"{max(lengths[k] - n_transient, 0)} after n_transient={n_transient}: the "
             f"Local Polynomial Method needs at least {_LPM_MIN_SAMPLES} per sequence (one "
             "frequency bin). Lower n_transient or leave that sequence out."
@@ -168,7 +171,7 @@ def _nonparametric(U, Y, starts, params):
     if 0 < len(without_variance) < len(records):
         # An estimate whose variance is unknown cannot be weighted against the
         # others; unweighted, its few bins would decide the fit.
-        rows = ", ".join(_span(starts, k) for k in without_variance)
+        rows = ", ".join(_span(starts, k, first_rows) for k in without_variance)
         warn_at_caller(
             f"{len(without_variance)} sequence(s) too short for a variance estimate of "
             f"the Local Polynomial Method (sequence_id; rows {rows}) are left out of the "
@@ -178,7 +181,7 @@ def _nonparametric(U, Y, starts, params):
             for threshold in (LPM_POWER_THRESHOLD, _STRICT_POWER_THRESHOLD)]
 
 
-def fit_linear_model(U, Y, starts, params):
+def fit_linear_model(U, Y, starts, params, first_rows=None):
     """Fit the BLA on normalised signals.
 
     Parameters
@@ -189,6 +192,10 @@ def fit_linear_model(U, Y, starts, params):
         Sequence boundaries.
     params : dict
         The parameters of a :class:`BLAEstimator`.
+    first_rows : ndarray of int, default=None
+        The row of the user's ``X`` at which every sequence starts, for the
+        messages, when the sequences are parts of it; None when they are its
+        rows.
 
     Returns
     -------
@@ -198,7 +205,9 @@ def fit_linear_model(U, Y, starts, params):
     # synchronisation cost (tenfold on two cores, see DESIGN.md §2).
     with threadpool_limits(limits=1, user_api="blas"):
         try:
-            return _fit_linear_model(U, Y, starts, params)
+            return _fit_linear_model(U, Y, starts, params, first_rows)
+        except ValueError as error:
+            raise ValueError(f"{error}{_delay_note(starts, params)}") from error
         except np.linalg.LinAlgError as error:
             # Records far from any linear system (a spike that dwarfs the rest of
             # the record) can leave the FRF without a usable factorisation.
@@ -208,8 +217,19 @@ def fit_linear_model(U, Y, starts, params):
             ) from error
 
 
-def _fit_linear_model(U, Y, starts, params):
-    estimates = _nonparametric(U, Y, starts, params)
+def _delay_note(starts, params):
+    """What an error adds when ``input_delay`` leaves most samples of a
+    sequence without a measured input, the likely cause."""
+    delay = int(np.max(params["input_delay"]))
+    shortest = int(np.min(np.diff(starts)))
+    if 2 * delay <= shortest:
+        return ""
+    return (f" (input_delay={np.ravel(params['input_delay']).tolist()} leaves {max(shortest - delay, 0)} of the "
+            f"{shortest} samples of the shortest sequence a measured input.)")
+
+
+def _fit_linear_model(U, Y, starts, params, first_rows=None):
+    estimates = _nonparametric(U, Y, starts, params, first_rows)
     fit = _best_linear_fit(estimates, U, Y, starts, params)
     if fit.simulation_error > _DEAD_TIME_LEVEL and not np.any(params["input_delay"]):
         _check_dead_time(estimates[0], U, Y, starts, params, fit.simulation_error)

@@ -46,7 +46,7 @@ from .._linear._realization import estimate_initial_state, simulate_linear, spec
 from .._validation import ANY_INTEGER, Integers
 from ..exceptions import DataWarning, LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
-from ._base import _BaseStateSpace, normalisation_of
+from ._base import _BaseStateSpace, check_delay_fits, normalisation_of
 from ._bla import _MEAN_LEVEL, BLAEstimator, check_excitation, fit_linear_model, fitted_bla
 
 
@@ -245,13 +245,28 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if params["period"] is None:
             params["period"] = self.period
         *part, kept = part_before_holdout(U, Y, starts, fit_mask)
-        linear = fit_linear_model(*part, params)
+        try:
+            check_delay_fits(self.input_delay_, part[2])
+            linear = fit_linear_model(*part, params, first_rows=starts[kept])
+        except ValueError as error:
+            raise ValueError(f"{error}{self._holdout_note(starts, part[2], kept)}") from error
         if self.estimate_x0:
             # A sequence without a fitted row has no state of its own to fit.
             linear.x0 = every_sequence(linear.x0, kept, len(starts) - 1)
         self.bla_ = fitted_bla(params, linear, normalisation_of(self))
         return {"A": linear.A, "B": linear.B, "C": linear.C, "D": linear.D, "x0": linear.x0,
                 "y0": linear.output_offset}
+
+    def _holdout_note(self, starts, part_starts, kept):
+        """What an error of the linear start adds when it was fitted on
+        sequences cut before their held-out ends (see ``_linear_start``)."""
+        lengths, cut = np.diff(starts)[kept], np.diff(part_starts)
+        k = int(np.argmin(cut))
+        if cut[k] == lengths[k]:
+            return ""
+        return (f" The linear start is fitted on the samples before the held-out end of "
+                f"every sequence: validation_fraction={self.validation_fraction!r} leaves "
+                f"{cut[k]} of the {lengths[k]} samples of the shortest.")
 
     def _holds_x0(self, settling_time):
         """Whether the search holds the initial state at its starting value:

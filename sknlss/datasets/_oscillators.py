@@ -61,11 +61,22 @@ def _simulate_oscillator(u, params, sampling_time, n_substeps):
     return out
 
 
-def _oscillator_record(params, u, n_drop, sampling_time, n_substeps, noise_std, rng):
-    """Simulate from rest, drop the first ``n_drop`` samples, add the output noise."""
+def _oscillator_record(params, u, n_drop, sampling_time, n_substeps, noise_std, rng,
+                       input_rms):
+    """Simulate from rest, drop the first ``n_drop`` samples, add the output noise.
+
+    A ValueError when the integration overflows: a fixed step that suits the
+    oscillator at the documented amplitudes is unstable for the stiffness a
+    much larger input makes the cubic or hysteretic term reach.
+    """
     y = _simulate_oscillator(np.ascontiguousarray(u), params, float(sampling_time),
-                             int(n_substeps))[n_drop:]
-    return u[n_drop:].reshape(-1, 1), measure(y, noise_std, rng)
+                             int(n_substeps))
+    if not np.all(np.isfinite(y)):
+        raise ValueError(
+            f"The oscillator's simulation overflows at input_rms={input_rms!r}: its "
+            f"fixed-step integration (n_substeps={n_substeps!r} per sample) is unstable at "
+            "that amplitude. Lower input_rms or raise n_substeps.")
+    return u[n_drop:].reshape(-1, 1), measure(y[n_drop:], noise_std, rng)
 
 
 # ------------------------------------------------------------------ Duffing
@@ -192,9 +203,9 @@ def make_duffing(n_samples=4096, n_test_samples=2048, *, input_rms=0.02, noise_s
     u_test = gaussian_noise(n_total, band, input_rms, rng) * ramp(
         n_total, PRE_ROLL, 0.25, 1.5)
     X_est, y_est = _oscillator_record(params, u_est, n_samples, sampling_time,
-                                      n_substeps, noise_std, rng)
+                                      n_substeps, noise_std, rng, input_rms)
     X_test, y_test = _oscillator_record(params, u_test, PRE_ROLL, sampling_time,
-                                        n_substeps, noise_std, rng)
+                                        n_substeps, noise_std, rng, input_rms)
     return Bunch(
         X_est=X_est, y_est=y_est, X_test=X_test, y_test=y_test,
         sampling_time=float(sampling_time), noise_std=float(noise_std),
@@ -325,9 +336,9 @@ def make_bouc_wen(n_samples=4096, n_test_samples=2048, *, input_rms=50.0, noise_
     u_test = random_multisine(n_total, band, input_rms, rng, lines="full") * ramp(
         n_total, n_total - n_test_samples // 4, 1.0, 1.5)
     X_est, y_est = _oscillator_record(_BOUC_WEN_PARAMETERS, u_est, n_samples,
-                                      sampling_time, n_substeps, noise_std, rng)
+                                      sampling_time, n_substeps, noise_std, rng, input_rms)
     X_test, y_test = _oscillator_record(_BOUC_WEN_PARAMETERS, u_test, PRE_ROLL,
-                                        sampling_time, n_substeps, noise_std, rng)
+                                        sampling_time, n_substeps, noise_std, rng, input_rms)
     return Bunch(
         X_est=X_est, y_est=y_est, X_test=X_test, y_test=y_test,
         sampling_time=float(sampling_time), noise_std=float(noise_std),
