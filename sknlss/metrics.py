@@ -205,6 +205,10 @@ class _SimulationScorer(_MetadataRequester):
     def __init__(self, metric, *, n_transient):
         self.metric = metric
         self.n_transient = n_transient
+        # Unset until set_score_request: routing then refuses a routed
+        # sequence_id instead of dropping it, as for scikit-learn's scorers.
+        self._metadata_request = MetadataRequest(owner=self)
+        self._metadata_request.score.add_request(param="sequence_id", alias=None)
 
     def __call__(self, estimator, X, y_true, sequence_id=None):
         function, greater_is_better = _METRICS[self.metric]

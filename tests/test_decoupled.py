@@ -119,6 +119,17 @@ def test_fit_recovers_a_decoupled_system(wiener_data, wiener_model):
     assert rms_error(_wiener_system(u_new), model.predict(u_new)) < 0.05 * np.std(y)
 
 
+def test_a_dataframe_fit_warns_nothing_about_feature_names(wiener_data):
+    pd = pytest.importorskip("pandas")
+    u, y = wiener_data
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = DecoupledPNLSS(n_states=2, rank=2, max_iter=5, n_init=1, n_restarts=1,
+                               random_state=0).fit(pd.DataFrame({"u": u[:, 0]}), y)
+    assert not [w for w in caught if "feature names" in str(w.message)]
+    assert list(model.feature_names_in_) == ["u"]
+
+
 def test_fitted_attributes(wiener_model):
     model = wiener_model
     n, n_u, n_y, rank, d = 2, 1, 1, 1, 2

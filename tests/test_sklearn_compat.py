@@ -27,6 +27,7 @@ from sknlss import (
     PNLSSRegressor,
 )
 from sknlss.metrics import make_transient_scorer, rms_error
+from sknlss.model_selection import HoldoutSearch
 
 # A dynamical model's output at a sample depends on the samples before it, so
 # predicting a permuted or a partial record cannot give the permuted or partial
@@ -42,6 +43,9 @@ ESTIMATORS = [
     NLSS2Regressor(),
     DecoupledPNLSS(),
     NLLFRRegressor(),
+    # The search takes over its estimator's tags (a short search: the checks
+    # test the wrapper, whose candidates are the estimators above).
+    HoldoutSearch(NLLFRRegressor(n_init=1, max_iter=5), validation_fractions=(0.2, 0.3)),
 ]
 
 
@@ -239,3 +243,15 @@ def test_pickle_and_joblib_round_trip(estimator, three_records, tmp_path):
     path = tmp_path / "model.joblib"
     joblib.dump(fitted, path)
     np.testing.assert_array_equal(joblib.load(path).predict(u), expected)
+
+
+def test_a_transient_scorer_without_a_score_request_refuses_sequence_id(routing,
+                                                                        three_records):
+    # As scikit-learn's own scorers do: not silently scoring a fold of
+    # several records as one record.
+    u, y, sequence_id = three_records
+    search = GridSearchCV(BLAEstimator().set_fit_request(sequence_id=True),
+                          {"n_states": [1, 2]}, cv=GroupKFold(3),
+                          scoring=make_transient_scorer("rms", n_transient=20))
+    with pytest.raises(ValueError, match=r"sequence_id.*set_score_request"):
+        search.fit(u, y, groups=sequence_id, sequence_id=sequence_id)

@@ -518,7 +518,12 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         pnlss, starts, rows = self.pnlss_, context["starts"], context["rows"]
         X = context["U"] * self.u_scale_ + self.u_offset_
         sequence_id = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
-        states = pnlss.simulate(X, sequence_id=sequence_id, return_states=True)[1]
+        with warnings.catch_warnings():
+            # The rows are the user's, rebuilt as an array: a PNLSS model
+            # fitted on a DataFrame would warn about their missing column names.
+            warnings.filterwarnings("ignore", message="X does not have valid feature names",
+                                    category=UserWarning)
+            states = pnlss.simulate(X, sequence_id=sequence_id, return_states=True)[1]
         context["points"] = np.hstack([states, context["U"]])[rows.fit_rows[rows.original]]
         context["polynomial"] = _stack_polynomials(pnlss.E_, pnlss.state_exponents_,
                                                    pnlss.F_, pnlss.output_exponents_)
