@@ -130,6 +130,14 @@ def test_a_dataframe_fit_warns_nothing_about_feature_names(wiener_data):
     assert list(model.feature_names_in_) == ["u"]
 
 
+def test_too_few_sampling_points_are_refused_before_the_pnlss_fit(wiener_data, monkeypatch):
+    u, y = wiener_data
+    monkeypatch.setattr(PNLSSRegressor, "fit", lambda *args, **kwargs: pytest.fail("fitted"))
+    with pytest.raises(ValueError, match=r"n_sampling_points=2 cannot determine branches of "
+                                         r"degree 3; use at least 3"):
+        DecoupledPNLSS(n_states=2, rank=2, n_sampling_points=2).fit(u, y)
+
+
 def test_fitted_attributes(wiener_model):
     model = wiener_model
     n, n_u, n_y, rank, d = 2, 1, 1, 1, 2

@@ -710,6 +710,10 @@ def test_estimate_initial_state_bad_input(fitted_models, record):
         model.estimate_initial_state(u, y, x0=np.zeros(3))
     with pytest.raises(ValueError, match="x0 must be finite"):
         model.estimate_initial_state(u, y, x0=[np.nan, 0.0])
+    with pytest.raises(ValueError, match="x0: Complex data not supported"):
+        model.estimate_initial_state(u, y, x0=np.array([5j, 0.0]))
+    with pytest.raises(ValueError, match="x0: Complex data not supported"):
+        model.predict(u, x0=np.array([5j, 0.0]))
 
 
 def test_warnings_point_at_the_line_that_called_the_library(record):

@@ -338,6 +338,9 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             # mean, the state a record of these experiments starts from on
             # average.
             x0 = self.x0_ if self.x0_.ndim == 1 else self.x0_.mean(axis=0)
+        if np.iscomplexobj(x0):
+            # NumPy would drop the imaginary part with a warning only.
+            raise ValueError("x0: Complex data not supported; the states are real.")
         with naming("x0"):
             x0 = np.asarray(x0, dtype=np.float64)
         if x0.shape not in ((n_states,), (n_sequences, n_states)):

@@ -450,6 +450,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         # this estimator's name, not its template's.
         starts = self._validate_training_data(X, y, sequence_id)[2]
         self._check_transient(starts, self._validation_shares(starts))
+        # Before the PNLSS fit, with the degree its settings give (monomials
+        # listed explicitly are checked once it is fitted).
+        self._check_sampling_points(self.branch_degree if self.branch_degree is not None
+                                    else max(2, int(np.max(self._template().degree))))
         pnlss = clone(self._template())
         pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
         with warnings.catch_warnings(record=True) as caught:
@@ -482,8 +486,15 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         exponents = np.vstack([pnlss.state_exponents_, pnlss.output_exponents_])
         return max(2, int(exponents.sum(axis=1).max())) if len(exponents) else 2
 
+    def _check_sampling_points(self, degree):
+        if self.n_sampling_points < degree:
+            raise ValueError(
+                f"{type(self).__name__}: n_sampling_points={self.n_sampling_points} cannot "
+                f"determine branches of degree {degree}; use at least {degree}.")
+
     def _make_terms(self, n_inputs, n_outputs):
         self.branch_degree_ = self._branch_degree()
+        self._check_sampling_points(self.branch_degree_)
         return BranchTerms(self.n_states, n_inputs, n_outputs, self.rank,
                            PolynomialBasis(self.branch_degree_))
 
