@@ -694,6 +694,16 @@ def test_estimate_initial_state_recovers_the_state(name, fitted_models, record):
     np.testing.assert_allclose(model.predict(u, x0=x0), y, atol=1e-6 * np.std(y))
 
 
+def test_bla_settings_that_the_model_replaces_are_warned_about(record):
+    u, y = record
+    bla = BLAEstimator(n_states=1, input_delay=2)
+    with pytest.warns(UserWarning, match=r"bla: n_states=1, input_delay=2 is replaced by this "
+                                         r"model's own \(n_states=2, estimate_x0=False, "
+                                         r"input_delay=0\)"):
+        model = PNLSSRegressor(n_states=2, bla=bla, n_init=1, max_iter=1).fit(u, y)
+    assert model.bla_.n_states == 2 and bla.n_states == 1
+
+
 def test_estimate_initial_state_bad_input(fitted_models, record):
     model = fitted_models["PNLSS"]
     u, y = record[0][:20], record[1][:20]

@@ -195,8 +195,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         frequency-domain BLA.
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
-        this model's ``n_states``, ``input_delay``, ``estimate_x0`` and (if its
-        own is None) ``period``. ``None`` uses
+        this model's ``n_states``, ``input_delay``, ``estimate_x0`` (a value of
+        its own is replaced, with a warning) and (if its own is None)
+        ``period``. ``None`` uses
         :class:`BLAEstimator`'s defaults.
     max_iter : int, default=100
         Maximum number of Levenberg-Marquardt iterations of each start.

@@ -240,8 +240,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         starts from, keyed by block name: the BLA on the rows before the
         held-out tails (also set as ``bla_``, in the user's units)."""
         params = (self.bla if self.bla is not None else BLAEstimator()).get_params()
-        params.update(n_states=self.n_states, estimate_x0=self.estimate_x0,
-                      input_delay=self.input_delay)
+        forwarded = dict(n_states=self.n_states, estimate_x0=self.estimate_x0,
+                         input_delay=self.input_delay)
+        _warn_if_replaced(params, forwarded)
+        params.update(forwarded)
         if params["period"] is None:
             params["period"] = self.period
         *part, kept = part_before_holdout(U, Y, starts, fit_mask)
@@ -765,6 +767,22 @@ def ranged_prediction_terms(model, theta, U, starts, extrapolation):
     S = np.hstack([X, U])
     return model.terms.with_input_range(model.unpack(theta), S[np.all(np.isfinite(S), axis=1)],
                                         **_CONTINUATIONS[extrapolation])
+
+
+def _warn_if_replaced(params, forwarded):
+    """Warn when the ``bla`` settings ``params`` set one of the ``forwarded``
+    parameters away from its default to a value that the model's own replaces
+    (a grid over ``bla__n_states`` would otherwise run one candidate many
+    times)."""
+    defaults = BLAEstimator().get_params()
+    replaced = [f"{name}={params[name]!r}" for name, value in forwarded.items()
+                if not np.array_equal(params[name], defaults[name])
+                and not np.array_equal(params[name], value)]
+    if replaced:
+        warn_at_caller(
+            f"bla: {', '.join(replaced)} is replaced by this model's own "
+            f"({', '.join(f'{name}={forwarded[name]!r}' for name in forwarded)}); set it on "
+            "the model instead.", UserWarning)
 
 
 def _settling_time(linear, U, Y, starts):

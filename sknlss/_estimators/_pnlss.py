@@ -115,8 +115,9 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         a long one.
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
-        this model's ``n_states``, ``input_delay``, ``estimate_x0`` and (if its
-        own is None) ``period``. ``None`` uses
+        this model's ``n_states``, ``input_delay``, ``estimate_x0`` (a value of
+        its own is replaced, with a warning) and (if its own is None)
+        ``period``. ``None`` uses
         :class:`~sknlss.BLAEstimator`'s defaults.
     max_iter : int, default=200
         Maximum number of Levenberg-Marquardt iterations of each start.
