@@ -75,7 +75,7 @@ def fit_from(problem, candidates, *, label, **options):
             break
     else:
         raise ValueError(
-            f"{label}: no starting point can be simulated on the estimation data (X, y)."
+            f"{label}: no starting point can be simulated on the data (X, y) it is fitted to."
         )
     searched, start = problem, theta0
     held = problem.held
