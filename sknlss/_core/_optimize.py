@@ -137,12 +137,13 @@ def warn_if_still_improving(label, max_iter, losses, validation):
         ConvergenceWarning)
 
 
-def _finite_residual(residual, theta):
-    """Residual at ``theta``, or None when the simulation diverged."""
-    r = residual(theta, False)[0]
+def _finite_residual(residual, theta, jacobian):
+    """Residual at ``theta`` and, if ``jacobian``, its Jacobian; None for
+    both when the simulation diverged."""
+    r, J = residual(theta, jacobian)
     if r is None or not np.all(np.isfinite(r)):
-        return None
-    return r
+        return None, None
+    return r, J
 
 
 def levenberg_marquardt(
@@ -236,10 +237,17 @@ def levenberg_marquardt(
             s, Vt, projected = s[:rank], Vt[:rank], projected[:rank]
             if damping is None:
                 damping = s[0]
-            for _ in range(_MAX_REJECTED):
+            # The factors hold what the step needs: the Jacobian can go
+            # before the trials compute the next one.
+            J = None
+            for trial in range(_MAX_REJECTED):
                 step = _damped_step(s, Vt, col_scale, projected, damping)
                 candidate = theta + step
-                r_new = _finite_residual(residual, candidate)
+                # Most first trials are accepted (the damping fell after the
+                # last accepted step), and the Jacobian of an accepted one is
+                # needed next: the first trial computes it with the residual,
+                # which costs less than simulating the step twice.
+                r_new, J_new = _finite_residual(residual, candidate, trial == 0)
                 if r_new is not None and r_new @ r_new < cost:
                     break
                 damping *= _DAMPING_UP
@@ -249,7 +257,7 @@ def levenberg_marquardt(
             cost_new = float(r_new @ r_new)
             decrease = (cost - cost_new) / cost
             theta = candidate
-            r, J = residual(theta, True)
+            r, J = (r_new, J_new) if J_new is not None else residual(theta, True)
             cost = float(r @ r)
             n_iter += 1
             damping *= _DAMPING_DOWN
