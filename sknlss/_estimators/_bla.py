@@ -207,7 +207,10 @@ def fit_linear_model(U, Y, starts, params, first_rows=None):
         try:
             return _fit_linear_model(U, Y, starts, params, first_rows)
         except ValueError as error:
-            raise ValueError(f"{error}{_delay_note(starts, params)}") from error
+            note = _delay_note(starts, params)
+            if not note:
+                raise
+            raise ValueError(f"{error}{note}") from error
         except np.linalg.LinAlgError as error:
             # Records far from any linear system (a spike that dwarfs the rest of
             # the record) can leave the FRF without a usable factorisation.
@@ -224,8 +227,9 @@ def _delay_note(starts, params):
     shortest = int(np.min(np.diff(starts)))
     if 2 * delay <= shortest:
         return ""
-    return (f" (input_delay={np.ravel(params['input_delay']).tolist()} leaves {max(shortest - delay, 0)} of the "
-            f"{shortest} samples of the shortest sequence a measured input.)")
+    return (f" (input_delay={np.ravel(params['input_delay']).tolist()} leaves "
+            f"{max(shortest - delay, 0)} of the {shortest} samples of the shortest sequence "
+            "a measured input.)")
 
 
 def _fit_linear_model(U, Y, starts, params, first_rows=None):

@@ -251,7 +251,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             check_delay_fits(self.input_delay_, part[2])
             linear = fit_linear_model(*part, params, first_rows=starts[kept])
         except ValueError as error:
-            raise ValueError(f"{error}{self._holdout_note(starts, part[2], kept)}") from error
+            note = self._holdout_note(starts, part[2], kept)
+            if not note:
+                raise
+            raise ValueError(f"{error}{note}") from error
         if self.estimate_x0:
             # A sequence without a fitted row has no state of its own to fit.
             linear.x0 = every_sequence(linear.x0, kept, len(starts) - 1)
