@@ -252,6 +252,23 @@ def test_problem_jacobian_matches_central_differences(terms, options):
     np.testing.assert_allclose(J, J_fd, rtol=1e-5, atol=1e-6 * np.abs(J_fd).max())
 
 
+@pytest.mark.parametrize("terms", TERMS)
+@pytest.mark.parametrize("options", [{}, {"period": True}, {"stability_penalty": 1.0},
+                                     {"weight_decay": 0.3}],
+                         ids=["time", "frequency", "stability", "decay"])
+def test_residual_is_the_same_with_and_without_the_jacobian(terms, options):
+    # The optimiser takes an accepted first trial's residual from the
+    # sensitivities and the others' from the simulation alone: the fits are
+    # those of always simulating only if the two residuals are equal to the bit.
+    problem, theta = _problem(terms, **options)
+    theta[problem.model.columns("A")] *= 1.4
+    theta[problem.model.columns("B", "C")] *= 0.1
+    r_plain = problem.residual(theta, False)[0]
+    r_with_jacobian = problem.residual(theta, True)[0]
+    assert r_plain is not None
+    np.testing.assert_array_equal(r_plain, r_with_jacobian)
+
+
 def test_stability_penalty_rows_direct_dependence():
     problem, theta = _problem(stability_penalty=1.0)
     model = problem.model
