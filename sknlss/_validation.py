@@ -61,3 +61,19 @@ def naming(argument):
             raise
         kind = TypeError if isinstance(error, TypeError) else ValueError
         raise kind(f"{argument}: {error}") from error
+
+
+@contextmanager
+def explained(note):
+    """Append ``note()``, the likely cause, to a ValueError raised in the block.
+
+    ``note`` is called only when the block fails; when it returns an empty
+    string the error is raised unchanged (its type kept).
+    """
+    try:
+        yield
+    except ValueError as error:
+        cause = note()
+        if not cause:
+            raise
+        raise ValueError(f"{error}{cause}") from error

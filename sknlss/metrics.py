@@ -243,7 +243,6 @@ class _SimulationScorer(_MetadataRequester):
                 "set_score_request needs metadata routing: call "
                 "sklearn.set_config(enable_metadata_routing=True) first."
             )
-        self._metadata_request = MetadataRequest(owner=self)
         self._metadata_request.score.add_request(param="sequence_id", alias=sequence_id)
         return self
 

@@ -34,7 +34,7 @@ from .._linear._realization import (
     spectral_radius,
     ss_frf,
 )
-from .._validation import Integers
+from .._validation import Integers, explained
 from ..exceptions import warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, normalisation_of
@@ -203,14 +203,10 @@ def fit_linear_model(U, Y, starts, params, first_rows=None):
     """
     # The factorisations here are small: multithreaded BLAS only adds
     # synchronisation cost (tenfold on two cores, see DESIGN.md §2).
-    with threadpool_limits(limits=1, user_api="blas"):
+    with (threadpool_limits(limits=1, user_api="blas"),
+          explained(lambda: _delay_note(starts, params))):
         try:
             return _fit_linear_model(U, Y, starts, params, first_rows)
-        except ValueError as error:
-            note = _delay_note(starts, params)
-            if not note:
-                raise
-            raise ValueError(f"{error}{note}") from error
         except np.linalg.LinAlgError as error:
             # Records far from any linear system (a spike that dwarfs the rest of
             # the record) can leave the FRF without a usable factorisation.

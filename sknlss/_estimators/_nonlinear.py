@@ -43,7 +43,7 @@ from .._core._sequences import (PERIODIC_TOLERANCE, every_sequence, holdout_mask
                                 part_before_holdout, periodic_sequences, steady_state_rows,
                                 transient_mask)
 from .._linear._realization import estimate_initial_state, simulate_linear, spectral_radius
-from .._validation import ANY_INTEGER, Integers
+from .._validation import ANY_INTEGER, Integers, explained
 from ..exceptions import DataWarning, LinearFallbackWarning, warn_at_caller
 from ..metrics import nrmse
 from ._base import _BaseStateSpace, check_delay_fits, normalisation_of
@@ -247,14 +247,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if params["period"] is None:
             params["period"] = self.period
         *part, kept = part_before_holdout(U, Y, starts, fit_mask)
-        try:
+        with explained(lambda: self._holdout_note(starts, part[2], kept)):
             check_delay_fits(self.input_delay_, part[2])
             linear = fit_linear_model(*part, params, first_rows=starts[kept])
-        except ValueError as error:
-            note = self._holdout_note(starts, part[2], kept)
-            if not note:
-                raise
-            raise ValueError(f"{error}{note}") from error
         if self.estimate_x0:
             # A sequence without a fitted row has no state of its own to fit.
             linear.x0 = every_sequence(linear.x0, kept, len(starts) - 1)
