@@ -175,6 +175,20 @@ def test_held_initial_state_of_a_bla_with_its_own_transient(record):
     assert np.median(ratios) < 0.1
 
 
+@pytest.mark.parametrize("name", FACTORIES)
+def test_frequency_cost_says_when_it_cannot_weight_its_lines(name, periodic):
+    # The noise of a DFT line is estimated from its spread over the periods a
+    # sequence keeps in the cost: with one period each, every line counts alike.
+    X, y, sequence_id, period = periodic
+    options = dict(n_states=2, period=period, n_transient=period, cost="frequency",
+                   n_init=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        FACTORIES[name](**options).fit(X, y, sequence_id=sequence_id)
+    with pytest.warns(DataWarning, match="no sequence keeps two periods"):
+        FACTORIES[name](validation_fraction=2 / 3, **options).fit(X, y, sequence_id=sequence_id)
+
+
 def _terms_count(model):
     """Parameters beyond those of the (x0-estimating) linear model."""
     linear = sum(getattr(model, name).size
@@ -579,6 +593,41 @@ def test_a_fallback_made_by_the_boundedness_guard_warns(name, record, monkeypatc
     assert model.fell_back_to_linear_
     np.testing.assert_array_equal(model.start_status_, ["unbounded", "unbounded"])
     np.testing.assert_array_equal(model.predict(u), model.bla_.predict(u))
+    # The history is that of the parameters kept, which no iteration moved.
+    assert model.n_iter_ == model.best_iteration_ == 0
+    assert model.loss_history_.shape == model.validation_loss_history_.shape == (1,)
+    assert model.validation_loss_history_[0] == model.linear_loss_
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_check_bounded_false_ranks_the_starts_on_the_held_out_end_alone(
+        name, record, monkeypatch):
+    # No boundedness check may run, in this model or in the decoupled model's
+    # PNLSS model, and none may exclude a start.
+    u, y = record
+
+    def refuse(*args):
+        raise AssertionError("a boundedness check ran")
+
+    monkeypatch.setattr("sknlss._estimators._nonlinear.stays_bounded", refuse)
+    monkeypatch.setattr("sknlss._estimators._nonlinear._prefer_finite_when_doubled", refuse)
+    model = FACTORIES[name](n_states=2, n_init=2, check_bounded=False,
+                            refit=True).set_params(random_state=0).fit(u, y)
+    assert not set(model.start_status_) & {"unbounded", "escapes"}
+    best = int(np.argmin(model.start_losses_))
+    assert model.fell_back_to_linear_ == (not model.start_losses_[best] < model.linear_loss_)
+
+
+def test_the_guard_fallback_advises_only_what_is_not_set(record, monkeypatch):
+    # With the initial state estimated, no start transient is in the cost.
+    u, y = record
+    monkeypatch.setattr("sknlss._estimators._nonlinear.stays_bounded",
+                        lambda problem, theta: False)
+    with pytest.warns(LinearFallbackWarning, match="estimate_x0=True"):
+        PNLSSRegressor(2, max_iter=8, n_init=2).fit(u, y)
+    with pytest.warns(LinearFallbackWarning, match="fewer states or terms") as caught:
+        PNLSSRegressor(2, max_iter=8, n_init=2, estimate_x0=True).fit(u, y)
+    assert not any("n_transient" in str(w.message) for w in caught)
 
 
 def test_a_fallback_made_by_the_doubled_input_check_warns(record, monkeypatch):

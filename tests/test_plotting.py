@@ -97,6 +97,9 @@ def test_plot_frf_mimo_entry_and_existing_axes():
 def test_plot_frf_rejects_unfitted_or_invalid_input():
     with pytest.raises(ValueError, match="fitted BLAEstimator"):
         plot_frf(object())
+    # A nonlinear model is not a BLA, but it holds one.
+    with pytest.raises(ValueError, match=r"plot_frf\(model\.bla_\)"):
+        plot_frf(SimpleNamespace(bla_=_fake_bla()))
     bla = _fake_bla()
     bla.frf_[3] = np.nan
     with pytest.raises(ValueError, match=r"bla\.frf_ has non-finite"):

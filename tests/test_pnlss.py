@@ -127,6 +127,20 @@ def test_attributes_and_parameter_count():
     assert model.predict(U).shape == (300, 2)
 
 
+def test_empty_output_terms_keep_the_output_equation_linear():
+    # The toolbox's 'empty' selection: a polynomial state equation read out
+    # linearly, as when the output is a state.
+    u = 0.3 * np.random.default_rng(0).normal(size=(400, 1))
+    y = _quadratic_system(u)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model = PNLSSRegressor(2, degree=2, output_terms="empty", max_iter=5).fit(u, y)
+    assert model.F_.shape == (1, 0) and model.output_exponents_.shape == (0, 3)
+    # A, B, C, D and the six quadratic monomials of [x1, x2, u] in each row of E.
+    assert model.n_params_ == 4 + 2 + 2 + 1 + 2 * 6
+    assert np.all(np.isfinite(model.predict(u)))
+
+
 def _quadratic_system(u, x0=0.0):
     y = np.empty(len(u))
     x = x0

@@ -13,7 +13,7 @@ from sknlss._terms._polynomial import (
     monomial_jacobian,
 )
 
-STRUCTURES = ["full", "states_only", "no_cross_products", "inputs_only"]
+STRUCTURES = ["full", "states_only", "no_cross_products", "inputs_only", "empty"]
 
 
 @pytest.mark.parametrize("n_states, n_inputs, d", [(2, 1, 3), (3, 1, 3), (2, 2, 4), (1, 0, 5)])

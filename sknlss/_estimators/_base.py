@@ -370,7 +370,9 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             pass ``x0=model.x0_`` to simulate those sequences from their own);
             a nonlinear model fitted with ``period`` and ``n_transient`` then
             starts every sequence whose input repeats with the period in its
-            periodic steady state.
+            periodic steady state (a sequence of a single period counts as
+            repeating: nothing in it says otherwise; pass ``x0`` to start it
+            from a state).
         return_states : bool, default=False
             Also return the simulated states.
 

@@ -544,9 +544,10 @@ class BLAEstimator(_BaseStateSpace):
     D_ : ndarray of shape (n_outputs, n_inputs)
         Feed-through matrix.
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
-        Initial state, zero unless ``estimate_x0``; one per sequence when the
-        model was fitted on several (``predict`` starts any record from their
-        mean then, unless given ``x0``, e.g. ``x0_`` itself).
+        Initial state, zero unless ``estimate_x0``; with ``estimate_x0``, one
+        per sequence when the model was fitted on several (``predict`` starts
+        any record from their mean then, unless given ``x0``, e.g. ``x0_``
+        itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Correction of the output offset estimated with ``x0_`` (normalised
         units, zero unless ``estimate_x0``): the mean of a record that does not

@@ -218,6 +218,15 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         end of the record. A refinement that fails or leaves the
         boundedness guard is dropped. Decided on the estimation records
         and on simulated systems (see the user guide).
+    check_bounded : bool, default=True
+        Exclude from the ranking the starts that run away beyond the
+        estimation amplitude: whose output leaves ten times the measured range
+        on the estimation input enlarged by a fifth, or that diverge on the
+        input doubled while a start that does not is nearly as good (see the
+        user guide); a refit that leaves the first bound is dropped too.
+        ``False`` ranks the starts on the held-out end alone, as the PNLSS
+        toolbox does, for a user who judges extrapolation on records of
+        their own.
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
@@ -280,9 +289,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     g_output_weights_ : ndarray of shape (n_outputs, n_neurons)
     g_output_biases_ : ndarray of shape (n_outputs,)
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
-        Initial state (zero unless ``estimate_x0``), one per sequence when
-        the model was fitted on several; ``predict`` starts any record from
-        their mean then, unless given ``x0`` (e.g. ``x0_`` itself).
+        Initial state (zero unless ``estimate_x0``); with ``estimate_x0``,
+        one per sequence when the model was fitted on several: ``predict``
+        starts any record from their mean then, unless given ``x0`` (e.g.
+        ``x0_`` itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Zero: the biases of the output networks, ``g_output_biases_``, hold
         the constant output offset that the other estimators estimate with
@@ -439,9 +449,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     def __init__(self, n_states=2, *, alpha=0.3, n_neurons=2, activation="sigmoid",
                  estimate_x0=False, period=None, cost="time", stability_penalty=0.0,
                  weight_decay=10.0, refine_linear=True, bla=None, max_iter=100, tol=1e-9,
-                 validation_fraction="auto", refit=True, n_iter_no_change=None, n_init=5,
-                 n_jobs=None, random_state=None, input_delay=0, n_transient=0,
-                 verbose=0):
+                 validation_fraction="auto", refit=True, check_bounded=True,
+                 n_iter_no_change=None, n_init=5, n_jobs=None, random_state=None,
+                 input_delay=0, n_transient=0, verbose=0):
         self.n_states = n_states
         self.alpha = alpha
         self.n_neurons = n_neurons
@@ -457,6 +467,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         self.tol = tol
         self.validation_fraction = validation_fraction
         self.refit = refit
+        self.check_bounded = check_bounded
         self.n_iter_no_change = n_iter_no_change
         self.n_init = n_init
         self.n_jobs = n_jobs

@@ -103,6 +103,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         "tol": [Interval(Real, 0, None, closed="left")],
         "validation_fraction": [Interval(Real, 0, 1, closed="left"), StrOptions({"auto"})],
         "refit": ["boolean"],
+        "check_bounded": ["boolean"],
         "n_iter_no_change": [Integers(1, None, closed="left"), None],
         "n_init": [Integers(1, None, closed="left")],
         "n_jobs": [ANY_INTEGER, None],
@@ -484,6 +485,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # The problem with the largest hold-out serves the work shared by all
         # starts: it sees only rows that none of the starts selects on.
         problem = problem_sets[0][max(shares)]
+        self._warn_if_unweighted(problem)
         model = problem.model
         theta = model.pack_linear(linear)
         self.refit_n_iter_ = 0
@@ -515,6 +517,20 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # does, it moves into the offset of the output's normalisation.
         self.y_offset_ = self.y_offset_ + self.y_scale_ * self.output_offset_
         self._warn_if_worse_than_the_mean(U, Y - self.output_offset_, starts)
+
+    def _warn_if_unweighted(self, problem):
+        """Warn when the frequency-domain cost cannot weight its lines: the
+        noise is estimated from the spread over the periods that a sequence
+        keeps in the cost (``problem``'s, the largest hold-out), and none keeps
+        two."""
+        if self.cost == "frequency" and all(n < 2 for _, n in problem.blocks):
+            warn_at_caller(
+                f"{type(self).__name__}: with cost='frequency', no sequence keeps two "
+                f"periods of {self.period} samples in the cost (before its held-out end), "
+                "so the noise level of the DFT lines cannot be "
+                "estimated: every line is weighted alike. Fit more periods per "
+                "sequence, or hold out whole records instead (validation_fraction=0).",
+                DataWarning)
 
     def _warn_if_worse_than_the_mean(self, U, Y, starts):
         """Warn when the fitted model simulates its estimation record worse than
@@ -590,12 +606,12 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # that blows up on a larger copy of the estimation input is out.
         common = [problems[min(shares)] for problems in problem_sets]
         status = ["failed" if isinstance(outcome, Exception)
-                  else "beaten" if stays_bounded(common[c], outcome[0]) else "unbounded"
+                  else "beaten" if self._stays_bounded(common[c], outcome[0]) else "unbounded"
                   for (c, *_), outcome in zip(runs, outcomes)]
         judged = [common[c].held_out_loss(outcome[0]) if state != "failed" else np.inf
                   for (c, *_), outcome, state in zip(runs, outcomes, status)]
         losses = [loss if state == "beaten" else np.inf for loss, state in zip(judged, status)]
-        preferred = _prefer_finite_when_doubled(
+        preferred = losses if not self.check_bounded else _prefer_finite_when_doubled(
             losses, [(common[c], None if isinstance(outcome, Exception) else outcome[0])
                      for (c, *_), outcome in zip(runs, outcomes)])
         status = ["escapes" if kept != loss else state
@@ -623,7 +639,10 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if self.fell_back_to_linear_:
             self._report_fallback(losses[best], linear_loss, judged,
                                   common[0].val_rows.any())
-            return contexts[0]["model"], linear_theta, result
+            # The history describes the parameters kept: the linear model's,
+            # which no iteration of a start moved.
+            kept = fit_from(common[0], [linear_theta], label=self._label, max_iter=0)[1]
+            return contexts[0]["model"], linear_theta, kept
         if self.verbose:
             print(f"{self._label}: start {best} kept (held-out loss {losses[best]:.4g} "
                   f"against the linear model's {linear_loss:.4g}).", flush=True)
@@ -659,15 +678,24 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             reasons.append(f"{len(excluded['escapes'])} diverged on the input doubled, "
                            "where a start that stays finite was nearly as good")
         best = min(min(losses) for losses in excluded.values() if losses)
+        # With the initial state estimated, no start transient is in the cost.
+        transient = ("" if self.estimate_x0 else
+                     ", or from a start transient left in the cost: set n_transient to "
+                     "the settling time of bla_, or estimate_x0=True")
         warn_at_caller(
             f"{type(self).__name__}({self._structure()}): {n_excluded} of {len(judged)} "
             f"starts beat the linear model {where} (best {best:.4g} against "
             f"{linear_loss:.4g}), but {' and '.join(reasons)}; the linear model is kept "
             "(see its start_status_). A model that runs away just beyond the estimation "
-            "amplitude often comes from a record too short for the structure, or from a "
-            "start transient left in the cost: set n_transient to the settling time of "
-            "bla_, or estimate_x0=True.",
+            "amplitude often comes from a record too short for the structure (fewer "
+            f"states or terms may stay bounded){transient}. check_bounded=False keeps "
+            "the best start, if records of your own judge its extrapolation.",
             LinearFallbackWarning)
+
+    def _stays_bounded(self, problem, theta):
+        """The boundedness check of ``theta`` (see :func:`stays_bounded`), or
+        True without ``check_bounded``."""
+        return not self.check_bounded or stays_bounded(problem, theta)
 
     def _refits(self, shares):
         """Whether the kept start is refined on all the rows after the search."""
@@ -693,7 +721,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                                             **self._lm_options(problem))
         except START_ERRORS:
             return theta
-        if not stays_bounded(problem, refitted):
+        if not self._stays_bounded(problem, refitted):
             return theta
         self.refit_n_iter_ = result.n_iter
         return refitted

@@ -42,10 +42,12 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         Model order n.
     degree : int or tuple of int, default=(2, 3)
         Total degrees of the monomials in zeta and eta.
-    state_terms : {"full", "states_only", "no_cross_products", "inputs_only"} \
-            or array-like of shape (n_zeta, n_states + n_inputs), default="full"
+    state_terms : {"full", "states_only", "no_cross_products", "inputs_only", \
+            "empty"} or array-like of shape (n_zeta, n_states + n_inputs), \
+            default="full"
         Monomials of the state equation: all of them, those in x only, pure
-        powers only, those in u only, or an explicit exponent array.
+        powers only, those in u only, none (the equation stays linear), or an
+        explicit exponent array.
     output_terms : same as ``state_terms``, default="full"
         Monomials of the output equation.
     extrapolation : {"bounded", "continue", "linear"}, default="bounded"
@@ -137,6 +139,15 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         hold-out); a refinement that fails or leaves the boundedness guard is
         dropped. Off by default: on splits of the Cascaded Tanks estimation record
         it made this model worse on some (see the user guide).
+    check_bounded : bool, default=True
+        Exclude from the ranking the starts that run away beyond the
+        estimation amplitude: whose output leaves ten times the measured range
+        on the estimation input enlarged by a fifth, or that diverge on the
+        input doubled while a start that does not is nearly as good (see the
+        user guide); a refit that leaves the first bound is dropped too.
+        ``False`` ranks the starts on the held-out end alone, as the PNLSS
+        toolbox does, for a user who judges extrapolation on records of
+        their own.
     n_iter_no_change : int, default=None
         Stop once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
@@ -202,9 +213,10 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         model: beyond this box the polynomials go on as ``extrapolation``
         says.
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
-        Initial state (zero unless ``estimate_x0``), one per sequence when
-        the model was fitted on several; ``predict`` starts any record from
-        their mean then, unless given ``x0`` (e.g. ``x0_`` itself).
+        Initial state (zero unless ``estimate_x0``); with ``estimate_x0``,
+        one per sequence when the model was fitted on several: ``predict``
+        starts any record from their mean then, unless given ``x0`` (e.g.
+        ``x0_`` itself).
     output_offset_ : ndarray of shape (n_outputs,)
         Constant output offset estimated with ``x0_`` (normalised units, zero
         unless ``estimate_x0``), as the BLA estimates it; ``fit`` adds it to
@@ -326,6 +338,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         tol=1e-9,
         validation_fraction="auto",
         refit=False,
+        check_bounded=True,
         n_iter_no_change=None,
         n_init=5,
         n_jobs=None,
@@ -351,6 +364,7 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         self.tol = tol
         self.validation_fraction = validation_fraction
         self.refit = refit
+        self.check_bounded = check_bounded
         self.n_iter_no_change = n_iter_no_change
         self.n_init = n_init
         self.n_jobs = n_jobs

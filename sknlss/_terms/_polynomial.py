@@ -23,7 +23,7 @@ from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
 from .._core._model import RangedTerms
 
 #: Monomial selections understood by :func:`monomial_exponents`.
-STRUCTURES = ("full", "states_only", "no_cross_products", "inputs_only")
+STRUCTURES = ("full", "states_only", "no_cross_products", "inputs_only", "empty")
 #: Largest total degree of a monomial: a higher power overflows double
 #: precision as soon as its variable reaches 2 in magnitude (2**1024 is beyond
 #: the largest float), which normalised signals do; the compiled evaluation
@@ -105,7 +105,8 @@ def n_monomials(n_states, n_inputs, degree, structure="full"):
     if structure == "no_cross_products":
         return n_vars * len(_as_degrees(degree))
     # Monomials of total degree d in k variables: multisets of size d.
-    k = {"full": n_vars, "states_only": int(n_states), "inputs_only": int(n_inputs)}[structure]
+    k = {"full": n_vars, "states_only": int(n_states), "inputs_only": int(n_inputs),
+         "empty": 0}[structure]
     return sum(comb(k + d - 1, d) for d in _as_degrees(degree)) if k else 0
 
 
@@ -120,11 +121,12 @@ def monomial_exponents(n_states, n_inputs, degree, structure="full"):
         Number of inputs (the last ``n_inputs`` variables of s).
     degree : int or iterable of int
         Total degrees of the monomials, each >= 2, e.g. ``(2, 3)``.
-    structure : {"full", "states_only", "no_cross_products", "inputs_only"} \
-            or array-like of shape (n_terms, n_states + n_inputs)
+    structure : {"full", "states_only", "no_cross_products", "inputs_only", \
+            "empty"} or array-like of shape (n_terms, n_states + n_inputs)
         Which monomials to keep: all of them, those in x only, the pure powers
-        of single variables only, or those in u only. An explicit exponent
-        array is validated and returned as is (``degree`` is then ignored).
+        of single variables only, those in u only, or none. An explicit
+        exponent array is validated and returned as is (``degree`` is then
+        ignored).
 
     Returns
     -------
@@ -154,6 +156,7 @@ def monomial_exponents(n_states, n_inputs, degree, structure="full"):
         "no_cross_products": range(n_vars),
         "states_only": range(n_states),
         "inputs_only": range(n_states, n_vars),
+        "empty": range(0),
     }[structure]
     rows = []
     for d in _as_degrees(degree):
