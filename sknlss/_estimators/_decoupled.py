@@ -181,13 +181,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         it made this model worse on some (see the user guide).
     check_bounded : bool, default=True
         Exclude from the ranking the starts that run away beyond the
-        estimation amplitude: whose output leaves ten times the measured range
-        on the estimation input enlarged by a fifth, or that diverge on the
-        input doubled while a start that does not is nearly as good (see the
-        user guide); a refit that leaves the first bound is dropped too.
-        ``False`` ranks the starts on the held-out end alone, as the PNLSS
-        toolbox does, for a user who judges extrapolation on records of
-        their own.
+        estimation amplitude (see :class:`PNLSSRegressor`), in this model's
+        search and in that of the PNLSS model it starts from, which receives
+        it. ``False`` ranks the starts of both on the held-out end alone.
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
