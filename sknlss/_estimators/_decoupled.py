@@ -181,9 +181,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         it made this model worse on some (see the user guide).
     check_bounded : bool, default=True
         Exclude from the ranking the starts that run away beyond the
-        estimation amplitude (see :class:`~sknlss.PNLSSRegressor`), in this model's
-        search and in that of the PNLSS model it starts from, which receives
-        it. ``False`` ranks the starts of both on the held-out end alone.
+        estimation amplitude (see :class:`~sknlss.PNLSSRegressor`), in this
+        model's search and in that of the PNLSS model it starts from, which
+        receives it. ``False`` ranks the starts of both on the held-out end
+        alone.
     n_iter_no_change : int, default=None
         Stop a search once the validation loss has not improved for this many
         iterations (early stopping; it has no effect when
