@@ -319,7 +319,7 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         check_is_fitted(self)
         return self.best_estimator_.score(X, y, sample_weight, sequence_id=sequence_id)
 
-    def estimate_initial_state(self, X, y, *, x0=None, max_iter=100):
+    def estimate_initial_state(self, X, y, *, sequence_id=None, x0=None, max_iter=100):
         """Initial state of the selected model that fits a record's first
         samples (see its ``estimate_initial_state``).
 
@@ -329,7 +329,9 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
             Input signal.
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output.
-        x0 : array-like of shape (n_states,), default=None
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels of several records, each given its own state.
+        x0 : array-like of shape (n_states,) or (n_sequences, n_states), default=None
             Where the search starts; ``None`` starts as the selected model's
             ``estimate_initial_state`` does.
         max_iter : int, default=100
@@ -337,11 +339,13 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
 
         Returns
         -------
-        x0 : ndarray of shape (n_states,)
-            Initial state, as ``predict`` takes it.
+        x0 : ndarray of shape (n_states,) or (n_sequences, n_states)
+            Initial state, one row per sequence with ``sequence_id``, as
+            ``predict`` takes it.
         """
         check_is_fitted(self)
-        return self.best_estimator_.estimate_initial_state(X, y, x0=x0, max_iter=max_iter)
+        return self.best_estimator_.estimate_initial_state(
+            X, y, sequence_id=sequence_id, x0=x0, max_iter=max_iter)
 
     @property
     def n_params_(self):

@@ -58,6 +58,11 @@ def test_keeps_the_candidate_with_the_smallest_error_on_the_common_end():
     # The nonlinear fits beat the linear starts (max_iter=0) on this system.
     assert search.best_params_["max_iter"] == 3
     np.testing.assert_array_equal(search.predict(u), search.best_estimator_.predict(u))
+    # The state of each of several records, as the selected model gives it.
+    labels = np.repeat([0, 1], [40, 60])
+    np.testing.assert_array_equal(
+        search.estimate_initial_state(u[:100], y[:100], sequence_id=labels),
+        search.best_estimator_.estimate_initial_state(u[:100], y[:100], sequence_id=labels))
     assert search.score(u, y) == search.best_estimator_.score(u, y)
     assert search.n_params_ == search.best_estimator_.n_params_ == 1 + 1 + 1 + 1 + 3 + 3
 

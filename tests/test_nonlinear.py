@@ -743,6 +743,25 @@ def test_estimate_initial_state_recovers_the_state(name, fitted_models, record):
     np.testing.assert_allclose(model.predict(u, x0=x0), y, atol=1e-6 * np.std(y))
 
 
+@pytest.mark.parametrize("name", ["PNLSS", "BLA"])
+def test_estimate_initial_state_gives_one_state_per_sequence(name, fitted_models, record):
+    # Several records of the model's own, each from its state: the states come
+    # back in the order of the rows, whatever the labels, and predict takes them.
+    model = fitted_models[name]
+    u = np.vstack([record[0][:30], record[0][100:125]])
+    labels = np.repeat(["b", "a"], [30, 25])
+    x_true = np.array([[0.8, -0.5], [-0.3, 0.6]])
+    y = model.predict(u, sequence_id=labels, x0=x_true)
+    x0 = model.estimate_initial_state(u, y, sequence_id=labels, x0=np.zeros(2))
+    np.testing.assert_allclose(x0, x_true, atol=1e-6)
+    # Each row is the state of that sequence alone.
+    np.testing.assert_array_equal(
+        x0[1], model.estimate_initial_state(u[30:], y[30:], x0=np.zeros(2)))
+    with pytest.warns(UserWarning, match=r"\(sequence 1 in the order of the rows\) cannot "
+                                         r"determine the 2 states"):
+        model.estimate_initial_state(u[:31], y[:31], sequence_id=labels[:31])
+
+
 def test_bla_settings_that_the_model_replaces_are_warned_about(record):
     u, y = record
     bla = BLAEstimator(n_states=1, input_delay=2)

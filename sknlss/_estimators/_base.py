@@ -430,12 +430,12 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
 
     @validate_params({"max_iter": [Integers(0, None, closed="left")]},
                      prefer_skip_nested_validation=True)
-    def estimate_initial_state(self, X, y, *, x0=None, max_iter=100):
+    def estimate_initial_state(self, X, y, *, sequence_id=None, x0=None, max_iter=100):
         """The initial state from which the simulation fits a measured record best.
 
         A record that starts mid-motion starts from an unknown state. This
-        minimises the simulation error of ``(X, y)``, one sequence simulated
-        from its first sample, over the initial state alone (the model's
+        minimises the simulation error of ``(X, y)``, each sequence simulated
+        from its first sample, over its initial state alone (the model's
         parameters fixed) by Levenberg-Marquardt. Pass the first samples of a
         record (e.g. the ``init_window`` of a benchmark's test record) and
         simulate the whole record from the result with ``predict(X, x0=...)``.
@@ -446,7 +446,11 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             Input signal.
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Measured output.
-        x0 : array-like of shape (n_states,), default=None
+        sequence_id : array-like of shape (n_samples,), default=None
+            Sequence labels of several records (experiments): each gets its own
+            state, as the System Identification Toolbox's ``findstates`` gives
+            one per experiment.
+        x0 : array-like of shape (n_states,) or (n_sequences, n_states), default=None
             Where the search starts; ``None`` uses the fitted ``x0_`` (as
             ``simulate`` does).
         max_iter : int, default=100
@@ -454,9 +458,10 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
 
         Returns
         -------
-        x0 : ndarray of shape (n_states,)
+        x0 : ndarray of shape (n_states,) or (n_sequences, n_states)
             Initial state in the model's (normalised) state coordinates, as
-            ``predict`` and ``simulate`` take it.
+            ``predict`` and ``simulate`` take it; with ``sequence_id``, one row
+            per sequence in the order of the rows of ``X``.
 
         Examples
         --------
@@ -477,16 +482,22 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
                 f"y must have {X.shape[0]} rows (as X) and {self.C_.shape[0]} output(s); "
                 f"got shape {y.shape}."
             )
-        start = self._initial_states(x0, 1)[0]
-        if Y.size < start.size:
-            warn_at_caller(
-                f"estimate_initial_state: {Y.size} output value(s) cannot determine the "
-                f"{start.size} states; the state returned is one of many that fit them. "
-                "Pass more samples.", UserWarning)
+        starts = sequence_bounds(sequence_id, X.shape[0])
+        initial = self._initial_states(x0, len(starts) - 1)
+        U = self._model_input(X, starts)
+        Y = _normalised(Y, self.y_offset_, self.y_scale_)
         model, theta = self._fitted_model()
-        return fit_initial_state(model, theta, self._model_input(X, np.array([0, len(X)])),
-                                 _normalised(Y, self.y_offset_, self.y_scale_), start,
-                                 max_iter=max_iter)
+        states = []
+        for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
+            if (end - begin) * Y.shape[1] < initial.shape[1]:
+                which = "" if sequence_id is None else f" (sequence {k} in the order of the rows)"
+                warn_at_caller(
+                    f"estimate_initial_state: {(end - begin) * Y.shape[1]} output value(s)"
+                    f"{which} cannot determine the {initial.shape[1]} states; the state "
+                    "returned is one of many that fit them. Pass more samples.", UserWarning)
+            states.append(fit_initial_state(model, theta, U[begin:end], Y[begin:end],
+                                            initial[k], max_iter=max_iter))
+        return states[0] if sequence_id is None else np.array(states)
 
     def score(self, X, y, sample_weight=None, *, sequence_id=None):
         """R² of the simulated output, skipping ``n_transient`` samples per
