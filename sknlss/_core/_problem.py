@@ -91,7 +91,8 @@ def _output_noise_weights(Y, blocks, period):
 
     The noise variance of the per-period DFT of the output is estimated from its
     variation over the periods of each sequence (pooled over the sequences that
-    have at least two periods). Returns ones when no sequence has two periods.
+    have at least two periods). Returns None when no sequence has two periods:
+    the noise cannot be estimated.
     """
     n_outputs = Y.shape[1]
     total = np.zeros((period // 2 + 1, n_outputs))
@@ -106,7 +107,7 @@ def _output_noise_weights(Y, blocks, period):
         total += np.sum(np.abs(spectra - spectra.mean(axis=0)) ** 2, axis=0) / period
         dof += n_periods - 1
     if dof == 0:
-        return np.ones_like(total)
+        return None
     variance = total / dof
     peak = variance.max(axis=0)
     # A line whose variance is numerically zero (noiseless data) must not get
@@ -241,7 +242,9 @@ class SimulationErrorProblem:
     frequency_period : int, default=None
         When set, the cost is the weighted per-period DFT of the simulation
         error (every sequence's cost rows a whole number of periods); the noise
-        weights come from the variation over the periods.
+        weights come from the variation over the periods (``noise_weighted``
+        says whether a sequence keeps two periods to estimate it; every line
+        counts alike otherwise).
     stability_penalty : float, default=0.0
         Weight of the mean squared excess over 1 of the spectral radius of the
         state map's local Jacobian ``A + dh_x/dx`` at the fitted samples,
@@ -287,7 +290,10 @@ class SimulationErrorProblem:
                 for begin, n_periods in period_blocks(self.fit_rows, self.starts,
                                                       frequency_period)
             ]
-            self.weights = _output_noise_weights(Y_fit, self.blocks, frequency_period)
+            weights = _output_noise_weights(Y_fit, self.blocks, frequency_period)
+            self.noise_weighted = weights is not None
+            self.weights = (weights if self.noise_weighted
+                            else np.ones((frequency_period // 2 + 1, Y_fit.shape[1])))
             self.target = _frequency_rows(Y_fit, self.blocks, frequency_period,
                                           self.weights).ravel()
         # The losses are averaged over the simulation-error residuals only: the

@@ -132,12 +132,12 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Template of the PNLSS model that is decoupled; it receives
         ``n_states``, ``input_delay``, ``estimate_x0``, ``period``, ``cost``,
         ``validation_fraction``, ``check_bounded``, ``n_transient``,
-        ``n_jobs`` and ``random_state`` from this estimator, and its normalisation of the
-        signals (``center``) is used by the decoupled model too. ``None``
-        uses ``PNLSSRegressor()``. The template's own hyperparameters are
-        tunable as ``pnlss__degree`` and so on once a template is given
-        (``pnlss=PNLSSRegressor()``): as with scikit-learn's meta-estimators,
-        ``None`` has no parameters to set.
+        ``n_jobs`` and ``random_state`` from this estimator, and its
+        normalisation of the signals (``center``) is used by the decoupled
+        model too. ``None`` uses ``PNLSSRegressor()``. The template's own
+        hyperparameters are tunable as ``pnlss__degree`` and so on once a
+        template is given (``pnlss=PNLSSRegressor()``): as with scikit-learn's
+        meta-estimators, ``None`` has no parameters to set.
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
         sequence must be a whole number of periods; each sequence is then

@@ -519,18 +519,15 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self._warn_if_worse_than_the_mean(U, Y - self.output_offset_, starts)
 
     def _warn_if_unweighted(self, problem):
-        """Warn when the frequency-domain cost cannot weight its lines: the
-        noise is estimated from the spread over the periods that a sequence
-        keeps in the cost (``problem``'s, the largest hold-out), and none keeps
-        two."""
-        if self.cost == "frequency" and all(n < 2 for _, n in problem.blocks):
+        """Warn when the frequency-domain cost of ``problem`` (the largest
+        hold-out's, which keeps the fewest periods) cannot weight its lines."""
+        if self.cost == "frequency" and not problem.noise_weighted:
             warn_at_caller(
                 f"{type(self).__name__}: with cost='frequency', no sequence keeps two "
                 f"periods of {self.period} samples in the cost (before its held-out end), "
-                "so the noise level of the DFT lines cannot be "
-                "estimated: every line is weighted alike. Fit more periods per "
-                "sequence, or hold out whole records instead (validation_fraction=0).",
-                DataWarning)
+                "so the noise level of the DFT lines cannot be estimated: every line is "
+                "weighted alike. Fit more periods per sequence, or hold out whole records "
+                "instead (validation_fraction=0).", DataWarning)
 
     def _warn_if_worse_than_the_mean(self, U, Y, starts):
         """Warn when the fitted model simulates its estimation record worse than
