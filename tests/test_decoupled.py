@@ -8,8 +8,8 @@ from scipy.signal import lfilter
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
-from sknlss import (BLAEstimator, DecoupledPNLSS, LinearFallbackWarning, PNLSSRegressor,
-                    PolynomialBasis)
+from sknlss import (BLAEstimator, ChebyshevBasis, DecoupledPNLSS, LegendreBasis,
+                    LinearFallbackWarning, PNLSSRegressor, PolynomialBasis)
 from sknlss._core._model import StateSpaceModel
 from sknlss._estimators._decoupled import _stack_polynomials
 from sknlss._terms._branches import BranchTerms
@@ -42,9 +42,12 @@ def test_branch_terms_follow_the_equations():
     assert X.shape == (5, 2)
 
 
-def test_branch_terms_continue_along_tangents_beyond_their_input_range():
+@pytest.mark.parametrize("basis", [PolynomialBasis(3), LegendreBasis(3),
+                                   ChebyshevBasis(2, constant=True)])
+def test_branch_terms_continue_along_tangents_beyond_their_input_range(basis):
+    # The kernels apply the functions that the basis's evaluate() gives, for
+    # every family, inside the range and along the tangents beyond it.
     rng = np.random.default_rng(3)
-    basis = PolynomialBasis(3)
     input_range = np.array([[-0.1, -0.3], [0.2, 0.1]])
     model = StateSpaceModel(2, 1, 1, BranchTerms(2, 1, 1, 2, basis, input_range))
     values = {name: 0.3 * rng.standard_normal(shape) for name, shape in model.blocks}

@@ -147,6 +147,41 @@ def test_bad_basis(basis, message, records):
         NLLFRRegressor(n_states=2, basis=basis).fit(u, y)
 
 
+class _OwnFunctions:
+    """A basis object of a kind the compiled kernels do not know."""
+
+    def evaluate(self, z):
+        z = np.asarray(z)[:, None]
+        return np.exp(-z**2), -2 * z * np.exp(-z**2)
+
+
+class _RedefinedLegendre(LegendreBasis):
+    def evaluate(self, z):
+        values, slopes = super().evaluate(z)
+        return 2 * values, 2 * slopes
+
+
+class _LegendreOfDegree5(LegendreBasis):
+    def __init__(self, degree=5, *, constant=False):
+        super().__init__(degree, constant=constant)
+
+
+@pytest.mark.parametrize("basis, message", [
+    (_OwnFunctions(), "must be a PolynomialBasis, LegendreBasis or ChebyshevBasis"),
+    (_RedefinedLegendre(3), "redefines evaluate"),
+])
+def test_a_basis_the_kernels_do_not_apply_is_refused(basis, message, records):
+    u, y, _, _ = records
+    with pytest.raises(TypeError, match=message):
+        NLLFRRegressor(n_states=2, basis=basis, n_init=1, max_iter=2).fit(u, y)
+
+
+def test_a_family_subclassed_for_its_parameters_is_fitted(records):
+    u, y, _, _ = records
+    model = NLLFRRegressor(n_states=2, basis=_LegendreOfDegree5(), n_init=1, max_iter=2)
+    assert model.fit(u, y).coefficients_.shape == (1, 5)
+
+
 def test_default_bases_take_the_starts_in_turn(records):
     # Each default basis gets the first starts (seeds and held-out shares) it
     # would get alone, and the fit keeps the best of all of them. One share

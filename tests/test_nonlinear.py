@@ -25,6 +25,7 @@ from sknlss import (
 )
 from sknlss._core._model import StateSpaceModel
 from sknlss._core._problem import SimulationErrorProblem, fit_rows
+from sknlss._estimators import _nonlinear
 from sknlss._estimators._nonlinear import (
     _prefer_finite_when_doubled,
     _settling_time,
@@ -575,6 +576,26 @@ def test_verbose_sums_up_every_start_in_the_calling_process(record, capsys):
             assert f": {model.n_iter_} iterations in " in summary[0]
     kept = int(np.flatnonzero(model.start_status_ == "kept")[0])
     assert lines[-1].startswith(f"NL-LFR: start {kept} kept (held-out loss")
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_a_fallback_when_no_start_can_be_simulated_warns(name, record, monkeypatch):
+    # Every start ends where its simulation diverges (made so here: the
+    # parameters each start returns are replaced by ones that blow up). No
+    # start gave the data a nonlinear model to judge, which the user must
+    # hear about.
+    u, y = record
+    run_starts = _nonlinear.run_starts
+
+    def diverging_starts(*args, **kwargs):
+        return [(np.full_like(outcome[0], 1e3), *outcome[1:])
+                for outcome in run_starts(*args, **kwargs)]
+
+    monkeypatch.setattr(_nonlinear, "run_starts", diverging_starts)
+    with pytest.warns(LinearFallbackWarning, match="none of the 2 starts could be simulated"):
+        model = FACTORIES[name](n_states=2, n_init=2).set_params(random_state=0).fit(u, y)
+    assert model.fell_back_to_linear_
+    assert np.all(np.isinf(model.start_losses_))
 
 
 @pytest.mark.parametrize("name", FACTORIES)

@@ -33,7 +33,7 @@ from sklearn.utils._param_validation import HasMethods, StrOptions
 
 from .._core._model import StateSpaceModel, parameter_count
 from .._linear._realization import simulate_linear, ss_frf
-from .._terms._bases import LegendreBasis, PolynomialBasis
+from .._terms._bases import LegendreBasis, PolynomialBasis, check_basis
 from .._terms._branches import BranchTerms
 from .._validation import Integers
 from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
@@ -82,7 +82,7 @@ def _continuation(extrapolation, basis):
     """
     if extrapolation != "auto":
         return extrapolation
-    return "continue" if isinstance(basis, PolynomialBasis) else "linear"
+    return "linear" if basis.bounded else "continue"
 
 
 def _branch_inputs(V, S, rows):
@@ -282,10 +282,12 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         Model order n.
     n_branches : int, default=1
         Number of branches r (the size of z and w).
-    basis : basis object, default=None
+    basis : PolynomialBasis, LegendreBasis or ChebyshevBasis, default=None
         Basis of the branch nonlinearities: :class:`~sknlss.PolynomialBasis`
         (powers from 2), :class:`~sknlss.LegendreBasis` or
-        :class:`~sknlss.ChebyshevBasis` (bounded, of ``tanh(z)``). ``None``
+        :class:`~sknlss.ChebyshevBasis` (bounded, of ``tanh(z)``); their
+        functions are compiled into the kernels, and an object of another
+        kind is refused at fit with a TypeError. ``None``
         gives the starts ``PolynomialBasis(3)`` and ``LegendreBasis(3)`` in
         turn, so that the held-out loss chooses between a power series and a
         bounded nonlinearity (with ``n_init=1``, the powers only); see
@@ -594,7 +596,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.verbose = verbose
 
     def _bases(self):
-        return _DEFAULT_BASES if self.basis is None else (self.basis,)
+        if self.basis is None:
+            return _DEFAULT_BASES
+        check_basis(self.basis)
+        return (self.basis,)
 
     def _make_terms(self, n_inputs, n_outputs, basis=None):
         return BranchTerms(self.n_states, n_inputs, n_outputs, self.n_branches,
@@ -614,9 +619,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
 
     def _n_drop(self, problem):
         # Similarity transforms of the states, the scaling of each branch's
-        # output and, for a power basis, of each branch's input leave the
+        # output and, for a homogeneous basis, of each branch's input leave the
         # simulated output unchanged.
-        per_branch = 2 if isinstance(problem.model.terms.basis, PolynomialBasis) else 1
+        per_branch = 2 if problem.model.terms.basis.homogeneous else 1
         return super()._n_drop(problem) + per_branch * self.n_branches
 
     def _start_terms(self, context, start, seed):

@@ -661,6 +661,14 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     for state in ("unbounded", "escapes")}
         n_excluded = sum(map(len, excluded.values()))
         if not n_excluded:
+            if not np.isfinite(judged).any():
+                # Not a verdict of the data on a nonlinear model: no start gave one.
+                warn_at_caller(
+                    f"{type(self).__name__}({self._structure()}): none of the "
+                    f"{len(judged)} starts could be simulated {where} (each diverged or "
+                    "failed); the linear model is kept (see start_status_ and verbose=1). "
+                    "Fewer states or terms may stay finite.", LinearFallbackWarning)
+                return
             if self.verbose:
                 print(f"{self._label}: no start beat the linear model {where} "
                       f"({best_loss:.4g} against {linear_loss:.4g}); the linear model "

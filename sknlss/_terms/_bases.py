@@ -4,71 +4,31 @@ A branch model (the NL-LFR model and the decoupled PNLSS model) applies a
 univariate function ``f_l(z) = sum_k c_lk phi_k(z)`` to each of its branch
 inputs ``z_l``. A basis is a small object that names its functions for the
 compiled code (``code``, ``degrees``) and evaluates them in NumPy through the
-same compiled routine. A new basis is a subclass and one case in
-:func:`basis_functions`.
+same compiled routine. The compiled kernels apply the functions that ``code``
+names, whatever the object's own methods would say, so a basis is an instance
+of one of the families below (see :func:`check_basis`).
+
+A new family is a subclass here (its ``code``, ``_degree_range``, ``bounded``
+and ``homogeneous``) and its case in
+:func:`sknlss._terms._branches.basis_functions`, which lives beside the
+kernels that inline it: numba's cache of a compiled function is renewed when
+the function's own file changes, not when a file it inlines from does.
 """
 
 import numpy as np
-from numba import njit
 
-_POWERS, _LEGENDRE, _CHEBYSHEV = 0, 1, 2
-
-
-@njit(cache=True, inline="always")
-def basis_functions(code, degrees, z, out, o_values, o_slopes):
-    """Values and derivatives of the basis functions of the given degrees at ``z``.
-
-    ``code`` selects the family: powers ``z**d``, or Legendre ``P_d`` or
-    Chebyshev ``T_d`` polynomials of ``tanh(z)``, which stay bounded however
-    far ``z`` goes. ``degrees`` are increasing; the values and the
-    derivatives with respect to ``z`` are written to ``out`` from the offsets
-    ``o_values`` and ``o_slopes``, one entry per degree.
-    """
-    top = 0
-    for d in degrees:
-        top = max(top, d)
-    if code == _POWERS:
-        for k in range(degrees.shape[0]):
-            d = degrees[k]
-            # Compiled code must not raise (z ** -1 at z = 0): degree 0 apart.
-            out[o_values + k] = z**d if d > 0 else 1.0
-            out[o_slopes + k] = d * z ** (d - 1) if d > 0 else 0.0
-        return
-    t = np.tanh(z)
-    chain = 1.0 - t * t
-    # Three-term recurrences in the degree d, carrying the polynomials of
-    # degrees d - 1 and d and their derivatives; the degrees are increasing.
-    p_prev, p_cur, dp_prev, dp_cur = 0.0, 1.0, 0.0, 0.0
-    k = 0
-    for d in range(top + 1):
-        while k < degrees.shape[0] and degrees[k] == d:
-            out[o_values + k] = p_cur
-            out[o_slopes + k] = dp_cur * chain
-            k += 1
-        if d == 0:
-            p_next, dp_next = t, 1.0
-        elif code == _LEGENDRE:
-            p_next = ((2 * d + 1) * t * p_cur - d * p_prev) / (d + 1)
-            dp_next = dp_prev + (2 * d + 1) * p_cur
-        else:
-            p_next = 2.0 * t * p_cur - p_prev
-            dp_next = 2.0 * p_cur + 2.0 * t * dp_cur - dp_prev
-        p_prev, p_cur, dp_prev, dp_cur = p_cur, p_next, dp_cur, dp_next
-
-
-@njit(cache=True)
-def _evaluate_points(code, degrees, z):
-    m = degrees.shape[0]
-    out = np.empty((z.shape[0], 2 * m))
-    for t in range(z.shape[0]):
-        basis_functions(code, degrees, z[t], out[t], 0, m)
-    return out[:, :m].copy(), out[:, m:].copy()
+from ._branches import BASIS_CODES, CHEBYSHEV, LEGENDRE, POWERS, evaluate_basis
 
 
 class _Basis:
     """Common behaviour of the bases: parameters, evaluation, comparison."""
 
-    code = _POWERS
+    #: The family's case in the compiled code (see :func:`check_basis`). A
+    #: family also says whether its functions stay ``bounded`` however far the
+    #: input goes, and whether they are ``homogeneous`` (scaling the input and
+    #: each coefficient by the matching power leaves the combination unchanged,
+    #: one more direction per branch that the data cannot fix).
+    code = None
     #: The constructor's parameters, in its order.
     _param_names = ("degree", "constant")
 
@@ -120,7 +80,7 @@ class _Basis:
         values, slopes : ndarray of shape (n_points, n_functions)
         """
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1)
-        return _evaluate_points(self.code, self.degrees, z)
+        return evaluate_basis(self.code, self.degrees, z)
 
     def get_params(self, deep=True):
         """Constructor parameters, for display and comparison.
@@ -193,7 +153,9 @@ class PolynomialBasis(_Basis):
     array([3, 5])
     """
 
-    code = _POWERS
+    code = POWERS
+    bounded = False
+    homogeneous = True
     _param_names = ("degree", "kind", "constant")
 
     def __init__(self, degree=3, *, kind="full", constant=False):
@@ -231,7 +193,9 @@ class LegendreBasis(_Basis):
         Include the constant ``P_0`` (see :class:`PolynomialBasis`).
     """
 
-    code = _LEGENDRE
+    code = LEGENDRE
+    bounded = True
+    homogeneous = False
 
 
 class ChebyshevBasis(_Basis):
@@ -248,4 +212,29 @@ class ChebyshevBasis(_Basis):
         Include the constant ``T_0`` (see :class:`PolynomialBasis`).
     """
 
-    code = _CHEBYSHEV
+    code = CHEBYSHEV
+    bounded = True
+    homogeneous = False
+
+
+def check_basis(basis):
+    """Refuse a basis whose functions the compiled kernels would not apply.
+
+    The kernels evaluate the family that ``basis.code`` names. An object of
+    another kind, or a subclass that redefines the functions (``evaluate``,
+    ``degrees``, ``n_functions``), would be fitted with other functions than
+    it describes, so it is refused here rather than fitted silently.
+    """
+    families = "PolynomialBasis, LegendreBasis or ChebyshevBasis"
+    if not isinstance(basis, _Basis) or basis.code not in BASIS_CODES:
+        raise TypeError(
+            f"basis must be a {families}, got {basis!r}: the compiled kernels apply "
+            "the functions of these families only, not a basis object's own evaluate(). "
+            "A new family is added to sknlss itself (see sknlss._terms._bases).")
+    redefined = [name for name in ("evaluate", "degrees", "n_functions")
+                 if getattr(type(basis), name) is not getattr(_Basis, name)]
+    if redefined:
+        raise TypeError(
+            f"basis {basis!r} redefines {', '.join(redefined)} of its family: the compiled "
+            "kernels would apply the family's functions, not these. Subclass a family "
+            f"({families}) only to change its parameters.")

@@ -11,6 +11,11 @@ branch inputs ``z = Cz x + Dz u`` and outputs ``w = f(z)``,
 PNLSS model with a power basis. The terms' parameters are
 ``[vec(V), vec(c), vec(W)]`` (row-major), so that the parameters entering
 ``h_x`` (V, c and the rows of W for the states) come first.
+
+The basis functions of every family (:mod:`sknlss._terms._bases`) are
+compiled here, inlined into the kernels below: numba renews the cache of a
+compiled function when its own file changes, so the code it inlines lives in
+the same file.
 """
 
 import numpy as np
@@ -18,7 +23,64 @@ from numba import njit
 
 from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
 from .._core._model import RangedTerms
-from ._bases import basis_functions
+
+#: Codes of the basis families in the compiled code.
+POWERS, LEGENDRE, CHEBYSHEV = 0, 1, 2
+BASIS_CODES = (POWERS, LEGENDRE, CHEBYSHEV)
+
+
+@njit(cache=True, inline="always")
+def basis_functions(code, degrees, z, out, o_values, o_slopes):
+    """Values and derivatives of the basis functions of the given degrees at ``z``.
+
+    ``code`` selects the family: powers ``z**d``, or Legendre ``P_d`` or
+    Chebyshev ``T_d`` polynomials of ``tanh(z)``, which stay bounded however
+    far ``z`` goes. ``degrees`` are increasing; the values and the
+    derivatives with respect to ``z`` are written to ``out`` from the offsets
+    ``o_values`` and ``o_slopes``, one entry per degree.
+    """
+    top = 0
+    for d in degrees:
+        top = max(top, d)
+    if code == POWERS:
+        for k in range(degrees.shape[0]):
+            d = degrees[k]
+            # Compiled code must not raise (z ** -1 at z = 0): degree 0 apart.
+            out[o_values + k] = z**d if d > 0 else 1.0
+            out[o_slopes + k] = d * z ** (d - 1) if d > 0 else 0.0
+        return
+    t = np.tanh(z)
+    chain = 1.0 - t * t
+    # Three-term recurrences in the degree d, carrying the polynomials of
+    # degrees d - 1 and d and their derivatives; the degrees are increasing.
+    p_prev, p_cur, dp_prev, dp_cur = 0.0, 1.0, 0.0, 0.0
+    k = 0
+    for d in range(top + 1):
+        while k < degrees.shape[0] and degrees[k] == d:
+            out[o_values + k] = p_cur
+            out[o_slopes + k] = dp_cur * chain
+            k += 1
+        if d == 0:
+            p_next, dp_next = t, 1.0
+        elif code == LEGENDRE:
+            p_next = ((2 * d + 1) * t * p_cur - d * p_prev) / (d + 1)
+            dp_next = dp_prev + (2 * d + 1) * p_cur
+        else:
+            p_next = 2.0 * t * p_cur - p_prev
+            dp_next = 2.0 * p_cur + 2.0 * t * dp_cur - dp_prev
+        p_prev, p_cur, dp_prev, dp_cur = p_cur, p_next, dp_cur, dp_next
+
+
+@njit(cache=True)
+def evaluate_basis(code, degrees, z):
+    """Values and slopes of the basis functions at the points ``z``, as the
+    kernels of this module compute them."""
+    m = degrees.shape[0]
+    out = np.empty((z.shape[0], 2 * m))
+    for t in range(z.shape[0]):
+        basis_functions(code, degrees, z[t], out[t], 0, m)
+    return out[:, :m].copy(), out[:, m:].copy()
+
 
 # spec = [rank, n_functions, basis code, degrees ...]
 # work = [lower (r), upper (r), g (r), g' (r), phi (r x n_functions),
