@@ -166,9 +166,16 @@ class _LegendreOfDegree5(LegendreBasis):
         super().__init__(degree, constant=constant)
 
 
+def _legendre_with_its_evaluate_replaced():
+    basis = LegendreBasis(3)
+    basis.evaluate = _OwnFunctions().evaluate
+    return basis
+
+
 @pytest.mark.parametrize("basis, message", [
     (_OwnFunctions(), "must be a PolynomialBasis, LegendreBasis or ChebyshevBasis"),
     (_RedefinedLegendre(3), "redefines evaluate"),
+    (_legendre_with_its_evaluate_replaced(), "redefines evaluate"),
 ])
 def test_a_basis_the_kernels_do_not_apply_is_refused(basis, message, records):
     u, y, _, _ = records

@@ -221,9 +221,10 @@ def check_basis(basis):
     """Refuse a basis whose functions the compiled kernels would not apply.
 
     The kernels evaluate the family that ``basis.code`` names. An object of
-    another kind, or a subclass that redefines the functions (``evaluate``,
-    ``degrees``, ``n_functions``), would be fitted with other functions than
-    it describes, so it is refused here rather than fitted silently.
+    another kind, or one whose functions (``evaluate``, ``degrees``,
+    ``n_functions``) are redefined, in a subclass or on the object itself,
+    would be fitted with other functions than it describes, so it is refused
+    here rather than fitted silently.
     """
     families = "PolynomialBasis, LegendreBasis or ChebyshevBasis"
     if not isinstance(basis, _Basis) or basis.code not in BASIS_CODES:
@@ -232,7 +233,7 @@ def check_basis(basis):
             "the functions of these families only, not a basis object's own evaluate(). "
             "A new family is added to sknlss itself (see sknlss._terms._bases).")
     redefined = [name for name in ("evaluate", "degrees", "n_functions")
-                 if getattr(type(basis), name) is not getattr(_Basis, name)]
+                 if name in vars(basis) or getattr(type(basis), name) is not getattr(_Basis, name)]
     if redefined:
         raise TypeError(
             f"basis {basis!r} redefines {', '.join(redefined)} of its family: the compiled "
