@@ -6,7 +6,7 @@ from scipy.signal import lfilter
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
-from sknlss import BLAEstimator, NLSS2Regressor
+from sknlss import BLAEstimator, LinearFallbackWarning, NLSS2Regressor
 from sknlss._core._model import StateSpaceModel
 from sknlss._estimators._nlss2 import ALPHA_GRID
 from sknlss._terms._network import NetworkTerms
@@ -101,8 +101,14 @@ def test_the_linear_model_to_fall_back_on_is_the_bla_with_its_offset():
     y = (lfilter([0.0, 1.0], [1.0, -1.5, 0.7], u[:, 0], zi=[2.0, -1.0])[0] + 0.5
          + 0.2 * rng.standard_normal(200))
     model = NLSS2Regressor(n_states=2, estimate_x0=True, refine_linear=False, max_iter=0,
-                           validation_fraction=0.25, n_init=2, random_state=0).fit(u, y)
+                           validation_fraction=0.25, n_init=2, random_state=0)
+    # The starts fit their own rows worse than the linear model: a verdict of
+    # the data, recorded without a warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LinearFallbackWarning)
+        model.fit(u, y)
     assert model.fell_back_to_linear_
+    assert np.all(np.isinf(model.start_losses_))
     # The output networks' biases hold the BLA's output offset; there is no
     # separate offset to duplicate them.
     np.testing.assert_array_equal(model.output_offset_, [0.0])

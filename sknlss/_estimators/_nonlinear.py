@@ -634,8 +634,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                         f"loss {loss:.4g}, {state}")
                 print(f"{self._label} start {i}: {done}", flush=True)
         if self.fell_back_to_linear_:
+            # Whether any start gave a model to judge: a loss is also inf for
+            # a start that fits its own rows worse than the linear model.
+            none_simulated = all(
+                isinstance(outcome, Exception) or common[c].simulate(outcome[0])[2]
+                for (c, *_), outcome in zip(runs, outcomes))
             self._report_fallback(losses[best], linear_loss, judged,
-                                  common[0].val_rows.any())
+                                  common[0].val_rows.any(), none_simulated)
             # The history describes the parameters kept: the linear model's,
             # which no iteration of a start moved.
             kept = fit_from(common[0], [linear_theta], label=self._label, max_iter=0)[1]
@@ -650,18 +655,19 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             theta_best = self._refit(problem_sets[c_best][0.0], theta_best)
         return contexts[c_best]["model"], theta_best, result
 
-    def _report_fallback(self, best_loss, linear_loss, judged, held_out):
+    def _report_fallback(self, best_loss, linear_loss, judged, held_out, none_simulated):
         """Say why the linear model is kept: no start beat it on the held-out
         rows (``held_out``, else the cost rows), or, with a warning, every
         start that did was excluded by a boundedness check, a verdict of the
-        check rather than of the data."""
+        check rather than of the data, or no start could be simulated there
+        (``none_simulated``: each diverged or failed)."""
         where = "on the held-out data" if held_out else "on the cost rows"
         excluded = {state: [loss for loss, status in zip(judged, self.start_status_)
                             if status == state and loss < linear_loss]
                     for state in ("unbounded", "escapes")}
         n_excluded = sum(map(len, excluded.values()))
         if not n_excluded:
-            if not np.isfinite(judged).any():
+            if none_simulated:
                 # Not a verdict of the data on a nonlinear model: no start gave one.
                 warn_at_caller(
                     f"{type(self).__name__}({self._structure()}): none of the "
