@@ -172,8 +172,13 @@ def _legendre_with_its_evaluate_replaced():
     return basis
 
 
+class _UnknownFamily(LegendreBasis):
+    code = 7
+
+
 @pytest.mark.parametrize("basis, message", [
-    (_OwnFunctions(), "must be a PolynomialBasis, LegendreBasis or ChebyshevBasis"),
+    (_OwnFunctions(), "must be a PolynomialBasis, LegendreBasis or ChebyshevBasis or None"),
+    (_UnknownFamily(3), "names no family the compiled kernels know"),
     (_RedefinedLegendre(3), "redefines evaluate"),
     (_legendre_with_its_evaluate_replaced(), "redefines evaluate"),
 ])

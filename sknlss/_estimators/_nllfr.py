@@ -29,11 +29,11 @@ search needs no recursive simulation.
 import numpy as np
 from scipy.optimize import least_squares
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import HasMethods, StrOptions
+from sklearn.utils._param_validation import StrOptions
 
 from .._core._model import StateSpaceModel, parameter_count
 from .._linear._realization import simulate_linear, ss_frf
-from .._terms._bases import LegendreBasis, PolynomialBasis, check_basis
+from .._terms._bases import BasisConstraint, LegendreBasis, PolynomialBasis, check_basis
 from .._terms._branches import BranchTerms
 from .._validation import Integers
 from ._nonlinear import _BaseNonlinearStateSpace, ranged_prediction_terms
@@ -556,7 +556,7 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     _parameter_constraints: dict = {
         **_BaseNonlinearStateSpace._parameter_constraints,
         "n_branches": [Integers(1, None, closed="left")],
-        "basis": [HasMethods(["evaluate"]), None],
+        "basis": [BasisConstraint(), None],
         "extrapolation": [StrOptions({"auto", "linear", "continue"})],
         "init": [StrOptions({"trajectory", "inference"})],
     }

@@ -16,8 +16,11 @@ the function's own file changes, not when a file it inlines from does.
 """
 
 import numpy as np
+from sklearn.utils._param_validation import HasMethods
 
 from ._branches import BASIS_CODES, CHEBYSHEV, LEGENDRE, POWERS, evaluate_basis
+
+_FAMILIES = "PolynomialBasis, LegendreBasis or ChebyshevBasis"
 
 
 class _Basis:
@@ -220,22 +223,41 @@ class ChebyshevBasis(_Basis):
 def check_basis(basis):
     """Refuse a basis whose functions the compiled kernels would not apply.
 
-    The kernels evaluate the family that ``basis.code`` names. An object of
-    another kind, or one whose functions (``evaluate``, ``degrees``,
-    ``n_functions``) are redefined, in a subclass or on the object itself,
-    would be fitted with other functions than it describes, so it is refused
-    here rather than fitted silently.
+    ``basis`` is an instance of a family's class (:class:`BasisConstraint`
+    checks that with the other parameters). The kernels evaluate the family
+    that ``basis.code`` names: a class that names none, or an instance whose
+    functions (``evaluate``, ``degrees``, ``n_functions``) are redefined, in a
+    subclass or on the object itself, would be fitted with other functions
+    than it describes, so it is refused here rather than fitted silently.
     """
-    families = "PolynomialBasis, LegendreBasis or ChebyshevBasis"
-    if not isinstance(basis, _Basis) or basis.code not in BASIS_CODES:
+    if basis.code not in BASIS_CODES:
         raise TypeError(
-            f"basis must be a {families}, got {basis!r}: the compiled kernels apply "
-            "the functions of these families only, not a basis object's own evaluate(). "
-            "A new family is added to sknlss itself (see sknlss._terms._bases).")
+            f"basis {basis!r} names no family the compiled kernels know (code "
+            f"{basis.code!r}); they apply the functions of {_FAMILIES} only. A new "
+            "family is added to sknlss itself (see sknlss._terms._bases).")
     redefined = [name for name in ("evaluate", "degrees", "n_functions")
                  if name in vars(basis) or getattr(type(basis), name) is not getattr(_Basis, name)]
     if redefined:
         raise TypeError(
             f"basis {basis!r} redefines {', '.join(redefined)} of its family: the compiled "
             "kernels would apply the family's functions, not these. Subclass a family "
-            f"({families}) only to change its parameters.")
+            f"({_FAMILIES}) only to change its parameters.")
+
+
+class BasisConstraint(HasMethods):
+    """The ``basis`` parameter's constraint for scikit-learn's parameter
+    validation: an instance of one of the families, named as the user knows
+    them (:func:`check_basis` then checks what an instance may not redefine).
+
+    A :class:`~sklearn.utils._param_validation.HasMethods` because scikit-learn
+    takes only its own kinds of constraint; the check is the instance's family.
+    """
+
+    def __init__(self):
+        super().__init__(["evaluate"])
+
+    def is_satisfied_by(self, val):
+        return isinstance(val, _Basis)
+
+    def __str__(self):
+        return f"a {_FAMILIES}"
