@@ -605,8 +605,12 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         status = ["failed" if isinstance(outcome, Exception)
                   else "beaten" if self._stays_bounded(common[c], outcome[0]) else "unbounded"
                   for (c, *_), outcome in zip(runs, outcomes)]
-        judged = [common[c].held_out_loss(outcome[0]) if state != "failed" else np.inf
-                  for (c, *_), outcome, state in zip(runs, outcomes, status)]
+        # (outputs, diverged) of each start on the common rows, None if it failed.
+        simulations = [None if state == "failed" else common[c].simulate(outcome[0])[::2]
+                       for (c, *_), outcome, state in zip(runs, outcomes, status)]
+        judged = [np.inf if simulation is None
+                  else common[c].held_out_loss(outcome[0], simulation)
+                  for (c, *_), outcome, simulation in zip(runs, outcomes, simulations)]
         losses = [loss if state == "beaten" else np.inf for loss, state in zip(judged, status)]
         preferred = losses if not self.check_bounded else _prefer_finite_when_doubled(
             losses, [(common[c], None if isinstance(outcome, Exception) else outcome[0])
@@ -636,9 +640,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if self.fell_back_to_linear_:
             # Whether any start gave a model to judge: a loss is also inf for
             # a start that fits its own rows worse than the linear model.
-            none_simulated = all(
-                isinstance(outcome, Exception) or common[c].simulate(outcome[0])[2]
-                for (c, *_), outcome in zip(runs, outcomes))
+            none_simulated = all(simulation is None or simulation[1]
+                                 for simulation in simulations)
             self._report_fallback(losses[best], linear_loss, judged,
                                   common[0].val_rows.any(), none_simulated)
             # The history describes the parameters kept: the linear model's,
