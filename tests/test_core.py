@@ -31,6 +31,8 @@ TERMS = {
     "branches-legendre": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 2, LegendreBasis(3)),
     "branches-chebyshev": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 1,
                                                           ChebyshevBasis(4)),
+    "branches-shifted": lambda n, n_u, n_y: BranchTerms(n, n_u, n_y, 3,
+                                                        LegendreBasis(2, shift=True)),
     # A box that the states and inputs of the test data leave on both sides,
     # one or several variables at a time.
     "polynomial-bounded": lambda n, n_u, n_y: PolynomialTerms(
@@ -45,6 +47,9 @@ TERMS = {
     "branches-continued": lambda n, n_u, n_y: BranchTerms(
         n, n_u, n_y, 2, PolynomialBasis(3), input_range=np.array([[-0.02, -0.01],
                                                                  [0.01, 0.03]])),
+    "branches-shifted-continued": lambda n, n_u, n_y: BranchTerms(
+        n, n_u, n_y, 2, ChebyshevBasis(3, shift=True),
+        input_range=np.array([[-0.02, -0.01], [0.01, 0.03]])),
 }
 DIMS = {"SISO": (2, 1, 1), "MIMO": (3, 2, 2)}
 

@@ -5,8 +5,10 @@ A linear state-space model with a static nonlinearity in feedback:
     x(t+1) = A x + B u + Bw w,   y(t) = C x + D u + Dw w,
     z(t) = Cz x + Dz u,          w_l(t) = f_l(z_l(t)),
 
-each ``f_l`` a combination of the functions of a univariate basis. The model
-covers Wiener-Hammerstein chains and Duffing-type oscillators with a few dozen
+each ``f_l`` a combination of the functions of a univariate basis (with a
+fitted bias of its input for a shifting basis; branches of one ``tanh`` each
+then form a one-hidden-layer network in feedback). The model covers
+Wiener-Hammerstein chains and Duffing-type oscillators with a few dozen
 parameters, and its nonlinearity is explicit, which makes it extrapolate
 better than a full multivariate polynomial.
 
@@ -94,6 +96,14 @@ def _branch_inputs(V, S, rows):
     return V, S @ V
 
 
+def _branch_functions(basis, z, bias=None):
+    """The basis functions at the branch inputs ``z`` (their bias included);
+    for a shifting basis, less their values at the bias: the branches are
+    anchored at zero, as the kernels evaluate them."""
+    values = basis.evaluate(z)[0]
+    return values if bias is None else values - basis.evaluate(bias)[0]
+
+
 def _linear_trajectory(problem, theta):
     """States and inputs ``[x, u]`` and outputs of the linear model ``theta``
     (its terms switched off) along the estimation record."""
@@ -101,14 +111,19 @@ def _linear_trajectory(problem, theta):
     return np.hstack([X_lin, problem.U]), Y_lin
 
 
-def _least_squares_terms(problem, theta, V, trajectory):
+def _least_squares_terms(problem, theta, V, trajectory, bias=None):
     """Output directions W and basis coefficients for fixed branch directions V.
 
     Along the linear model's ``trajectory`` (parameters ``theta``), basis
     function ``m`` of branch ``l`` enters state ``i`` through the linear
     dynamics and output ``j`` directly; the output error of the linear model
     is regressed on these responses, and each branch's block of products
-    ``W[:, l] c[l]`` is factored by its best rank-one approximation.
+    ``W[:, l] c[l]`` is factored by its best rank-one approximation. The
+    branch inputs are ``S @ V`` scaled to ``|z| <= 1``, plus ``bias`` for a
+    shifting basis.
+
+    Returns the terms' parameter blocks (``V`` scaled, ``W``,
+    ``coefficients`` and, when given, ``bias``).
     """
     model = problem.model
     n, n_y = model.n_states, model.n_outputs
@@ -117,12 +132,16 @@ def _least_squares_terms(problem, theta, V, trajectory):
     S, Y_lin = trajectory
     rows = problem.fit_rows
     V, Z = _branch_inputs(V, S, rows)
+    terms = {"V": V}
+    if bias is not None:
+        Z = Z + bias
+        terms["bias"] = bias
     rank, n_fun = V.shape[1], basis.n_functions
     x0 = np.zeros(n)
     pulses = StateSpaceModel(n, 1, n_y)
     columns = []
     for l in range(rank):
-        phi = basis.evaluate(Z[:, l])[0]
+        phi = _branch_functions(basis, Z[:, l], None if bias is None else bias[l])
         for m in range(n_fun):
             for i in range(n):
                 e = np.zeros((n, 1))
@@ -148,7 +167,7 @@ def _least_squares_terms(problem, theta, V, trajectory):
         left, sigma, right = np.linalg.svd(products[l].T, full_matrices=False)
         W[:, l] = left[:, 0] * np.sqrt(sigma[0])
         coefficients[l] = right[0] * np.sqrt(sigma[0])
-    return V, W, coefficients
+    return dict(terms, W=W, coefficients=coefficients)
 
 
 def _response(A, B, C, D, U, starts):
@@ -169,7 +188,7 @@ def _inferred_branch_outputs(A, C, Bw, Dw, R):
     return np.linalg.solve(GH @ G + penalty, GH @ R[:, :, None])[..., 0]
 
 
-def _inference_and_learning(problem, theta, V, basis, seed):
+def _inference_and_learning(problem, theta, V, bias, basis, seed):
     """Branch directions and coefficients by inference and learning.
 
     With the linear part of ``theta`` fixed, each evaluation infers the branch
@@ -179,8 +198,9 @@ def _inference_and_learning(problem, theta, V, basis, seed):
     ``w ~ f(z)`` by least squares, makes ``z`` and ``f(z)`` consistent by a
     few fixed-point iterations, and returns the output error that ``f(z)``
     leaves. The output directions ``W`` and the input directions ``V``
-    minimise it (``scipy.optimize.least_squares``) from the given ``V`` and
-    random ``W`` drawn from ``seed``. A basis without a degree-1 function gets
+    minimise it (``scipy.optimize.least_squares``) from the given ``V`` (and
+    branch input ``bias``, for a shifting basis; else None) and random ``W``
+    drawn from ``seed``. A basis without a degree-1 function gets
     a linear term during the search, moved into the linear part at the end
     (``fold``: ``[A B; C D] += W diag(fold) V^T``).
 
@@ -191,10 +211,11 @@ def _inference_and_learning(problem, theta, V, basis, seed):
 
     Returns
     -------
-    V, W : ndarray of shape (n_states + n_inputs, r), (n_states + n_outputs, r)
-    coefficients : ndarray of shape (r, n_basis_functions)
+    terms : dict
+        The terms' parameter blocks ``V``, ``W``, ``coefficients`` (and
+        ``bias`` when given).
     fold : ndarray of shape (r,)
-        All None when the search ends where the least squares fail.
+        Both None when the search ends where the least squares fail.
     """
     model = problem.model
     n, r = model.n_states, V.shape[1]
@@ -212,29 +233,34 @@ def _inference_and_learning(problem, theta, V, basis, seed):
     V, _ = _branch_inputs(V, S, rows)
     linear = 1 not in basis.degrees
     W_size = (n + model.n_outputs) * r
+    V_end = W_size + V.size
 
-    def features(z):
-        phi = basis.evaluate(z)[0]
+    def features(z, b):
+        phi = _branch_functions(basis, z, b)
         return np.hstack([z[:, None], phi]) if linear else phi
 
-    def branch_outputs(z, coefficients):
-        return np.column_stack([features(z[:, l]) @ coefficients[l] for l in range(r)])
+    def branch_outputs(z, b, coefficients):
+        return np.column_stack([features(z[:, l], b[l]) @ coefficients[l] for l in range(r)])
 
     def evaluate(p):
         W = p[: W_size].reshape(n + model.n_outputs, r)
-        Vp = p[W_size:].reshape(V.shape)
+        Vp = p[W_size:V_end].reshape(V.shape)
+        b = [None] * r if bias is None else p[V_end:]
         Bw, Dw, Cz = W[:n], W[n:], Vp[:n].T
         w = np.fft.irfft(_inferred_branch_outputs(A, C, Bw, Dw, spectrum), n=len(error), axis=0)
-        z_linear = S @ Vp
+        z_linear = S @ Vp if bias is None else S @ Vp + b
         z = z_linear + _response(A, Bw, Cz, np.zeros((r, r)), w, starts)
-        coefficients = [np.linalg.lstsq(features(z[rows, l]), w[rows, l], rcond=None)[0]
+        coefficients = [np.linalg.lstsq(features(z[rows, l], b[l]), w[rows, l], rcond=None)[0]
                         for l in range(r)]
         for _ in range(_FIXED_POINT_ITERATIONS):
-            w = branch_outputs(z, coefficients)
+            w = branch_outputs(z, b, coefficients)
             z = z_linear + _response(A, Bw, Cz, np.zeros((r, r)), w, starts)
-        w = branch_outputs(z, coefficients)
+        w = branch_outputs(z, b, coefficients)
         residual = (error - _response(A, Bw, C, Dw, w, starts))[rows].ravel()
-        return residual, W, Vp, np.array(coefficients)
+        terms = {"V": Vp, "W": W, "coefficients": np.array(coefficients)}
+        if bias is not None:
+            terms["bias"] = p[V_end:].copy()
+        return residual, terms
 
     def residual(p):
         # Directions whose fixed point runs away are bad directions.
@@ -244,17 +270,19 @@ def _inference_and_learning(problem, theta, V, basis, seed):
             return np.full(rows.size * model.n_outputs, _INFERENCE_PENALTY)
         return e if np.all(np.isfinite(e)) else np.full(e.shape, _INFERENCE_PENALTY)
 
-    p0 = np.concatenate([check_random_state(seed).standard_normal(W_size), V.ravel()])
+    p0 = np.concatenate([check_random_state(seed).standard_normal(W_size), V.ravel(),
+                         [] if bias is None else bias])
     with np.errstate(all="ignore"):
         found = least_squares(residual, p0, x_scale="jac", ftol=_INFERENCE_TOL,
                               max_nfev=_INFERENCE_STEPS)
         try:
-            _, W, V, coefficients = evaluate(found.x)
+            terms = evaluate(found.x)[1]
         except np.linalg.LinAlgError:
-            return None, None, None, None
+            return None, None
+    coefficients = terms["coefficients"]
     if linear:
-        return V, W, coefficients[:, 1:], coefficients[:, 0]
-    return V, W, coefficients, np.zeros(r)
+        return dict(terms, coefficients=coefficients[:, 1:]), coefficients[:, 0]
+    return terms, np.zeros(r)
 
 
 class NLLFRRegressor(_BaseNonlinearStateSpace):
@@ -269,7 +297,11 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         z(t)   &= C_z x(t) + D_z u(t), \\qquad
         w_l(t) = \\sum_k c_{lk} \\phi_k(z_l(t)),
 
-    with ``n_branches`` branches over a univariate basis :math:`\\phi`. A, B,
+    with ``n_branches`` branches over a univariate basis :math:`\\phi`. With a
+    shifting basis (``shift=True``), each branch input has a fitted bias
+    :math:`b_l` and each branch is anchored at zero:
+    :math:`w_l = \\sum_k c_{lk} (\\phi_k(z_l + b_l) - \\phi_k(b_l))`, so
+    that the zero state stays the model's rest state at the mean input. A, B,
     C, D start from the Best Linear Approximation; the branch inputs start
     along the BLA's outputs (further branches and starts in random
     directions), and the branch outputs and coefficients from a linear
@@ -285,7 +317,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     basis : PolynomialBasis, LegendreBasis or ChebyshevBasis, default=None
         Basis of the branch nonlinearities: :class:`~sknlss.PolynomialBasis`
         (powers from 2), :class:`~sknlss.LegendreBasis` or
-        :class:`~sknlss.ChebyshevBasis` (bounded, of ``tanh(z)``); their
+        :class:`~sknlss.ChebyshevBasis` (bounded, of ``tanh(z)``; with
+        ``shift=True``, of ``tanh(z + b)`` with a fitted bias per branch, and
+        ``LegendreBasis(1, shift=True)`` makes each branch one ``tanh`` unit:
+        ``n_branches`` of them are a small network in feedback); their
         functions are compiled into the kernels, and an object of another
         kind is refused at fit with a TypeError. ``None``
         gives the starts ``PolynomialBasis(3)`` and ``LegendreBasis(3)`` in
@@ -443,6 +478,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     Cz_ : ndarray of shape (n_branches, n_states)
     Dz_ : ndarray of shape (n_branches, n_inputs)
         Branch inputs ``z = Cz x + Dz u``.
+    bz_ : ndarray of shape (n_branches,)
+        Biases of the branch inputs with a shifting basis (``basis_.shift``):
+        branch ``l`` gives ``f_l(z_l + bz_[l]) - f_l(bz_[l])``; zero
+        otherwise.
     coefficients_ : ndarray of shape (n_branches, n_basis_functions)
         Basis coefficients of each branch.
     basis_ : basis object
@@ -468,7 +507,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         reports its FRF in the user's units.
     n_params_ : int
         Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
-        ``+ r (n + n_y) + r (n + n_u) + r n_basis`` (plus ``n + n_y``, x0 and
+        ``+ r (n + n_y) + r (n + n_u) + r n_basis`` (``+ r`` biases with a
+        shifting basis; plus ``n + n_y``, x0 and
         the output offset, with ``estimate_x0``; ``n`` per sequence for
         several).
     n_iter_ : int
@@ -610,8 +650,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
 
     def _n_terms_params(self, n_inputs, n_outputs):
         return max(parameter_count(BranchTerms.layout(
-            self.n_states, n_inputs, n_outputs, self.n_branches, basis.n_functions))
-            for basis in self._bases())
+            self.n_states, n_inputs, n_outputs, self.n_branches, basis.n_functions,
+            basis.shifted)) for basis in self._bases())
 
     def _prediction_terms(self, model, theta, U, starts):
         return ranged_prediction_terms(model, theta, U, starts,
@@ -628,59 +668,66 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         """Branch directions of a start and its least-squares terms.
 
         The first start's branch inputs lie along the outputs of the linear
-        model. Each other start takes the best of ``_SCREENED_DIRECTIONS``
-        random directions by the simulation error of its least-squares start.
+        model, without bias. Each other start takes the best of
+        ``_SCREENED_DIRECTIONS`` random directions (and, for a shifting basis,
+        biases drawn uniformly in [-1, 1], the range of the scaled branch
+        inputs) by the simulation error of its least-squares start.
 
-        Returns the drawn directions and the ``(V, W, coefficients)`` of the
-        start, V scaled to the range of the branch inputs.
+        Returns the drawn directions, their biases (None without shift) and
+        the terms' parameter blocks of the start, V scaled to the range of the
+        branch inputs.
         """
         problem, model, theta = context["problem"], context["model"], context["theta"]
-        n, n_u = model.n_states, model.n_inputs
+        n, n_u, r = model.n_states, model.n_inputs, self.n_branches
+        shifted = model.terms.basis.shifted
         values = model.unpack(theta)
         trajectory = _linear_trajectory(problem, theta)
         rng = check_random_state(seed)
         if start == 0:
-            directions = rng.standard_normal((n + n_u, self.n_branches))
+            directions = rng.standard_normal((n + n_u, r))
             along_outputs = np.hstack([values["C"], values["D"]]).T
-            k = min(self.n_branches, along_outputs.shape[1])
+            k = min(r, along_outputs.shape[1])
             directions[:, :k] = along_outputs[:, :k]
-            return directions, _least_squares_terms(problem, theta, directions, trajectory)
+            bias = np.zeros(r) if shifted else None
+            return directions, bias, _least_squares_terms(problem, theta, directions,
+                                                          trajectory, bias)
         best, best_loss = None, np.inf
         for _ in range(_SCREENED_DIRECTIONS):
-            directions = rng.standard_normal((n + n_u, self.n_branches))
-            V, W, c = terms = _least_squares_terms(problem, theta, directions, trajectory)
-            loss = problem.fit_loss(model.pack(dict(values, V=V, W=W, coefficients=c)))
+            directions = rng.standard_normal((n + n_u, r))
+            bias = rng.uniform(-1.0, 1.0, r) if shifted else None
+            terms = _least_squares_terms(problem, theta, directions, trajectory, bias)
+            loss = problem.fit_loss(model.pack({**values, **terms}))
             if best is None or loss < best_loss:
-                best, best_loss = (directions, terms), loss
+                best, best_loss = (directions, bias, terms), loss
         return best
 
     def _starting_points(self, context, start, seed):
         problem, model = context["problem"], context["model"]
-        directions, (V, W, c) = self._start_terms(context, start, seed)
+        directions, bias, terms = self._start_terms(context, start, seed)
         values = model.unpack(context["theta"])
-        theta = model.pack(dict(values, V=V, W=W, coefficients=c))
         # With weaker feedback the model is closer to the (stable) linear one;
         # without it, it is the linear model itself, a start that cannot fail to
         # simulate, from which the search grows the branches.
-        candidates = [theta] + [model.pack(dict(values, V=V, W=factor * W, coefficients=c))
-                                for factor in (1e-3, 0.0)]
+        candidates = [model.pack({**values, **terms, "W": factor * terms["W"]})
+                      for factor in (1.0, 1e-3, 0.0)]
         if self.init == "trajectory":
             return candidates
-        V, W, c, fold = _inference_and_learning(problem, context["theta"], directions,
-                                                model.terms.basis, seed)
-        if V is None:
+        terms, fold = _inference_and_learning(problem, context["theta"], directions, bias,
+                                              model.terms.basis, seed)
+        if terms is None:
             return candidates
         n = model.n_states
         linear = np.block([[values["A"], values["B"]], [values["C"], values["D"]]])
-        linear = linear + (W * fold) @ V.T
-        inferred = dict(values, A=linear[:n, :n], B=linear[:n, n:], C=linear[n:, :n],
-                        D=linear[n:, n:], V=V, W=W, coefficients=c)
+        linear = linear + (terms["W"] * fold) @ terms["V"].T
+        inferred = {**values, **terms, "A": linear[:n, :n], "B": linear[:n, n:],
+                    "C": linear[n:, :n], "D": linear[n:, n:]}
         return [model.pack(inferred)] + candidates
 
     def _set_terms(self, values):
         n = self.n_states
         V, W = values["V"], values["W"]
         self.Cz_, self.Dz_ = V[:n].T.copy(), V[n:].T.copy()
+        self.bz_ = values["bias"].copy() if "bias" in values else np.zeros(V.shape[1])
         self.Bw_, self.Dw_ = W[:n].copy(), W[n:].copy()
         self.coefficients_ = values["coefficients"]
         self.basis_ = self._model.terms.basis
@@ -688,5 +735,8 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         self.extrapolation_ = "continue" if self._model.terms.continued else "linear"
 
     def _terms_values(self):
-        return {"V": np.vstack([self.Cz_.T, self.Dz_.T]), "coefficients": self.coefficients_,
-                "W": np.vstack([self.Bw_, self.Dw_])}
+        values = {"V": np.vstack([self.Cz_.T, self.Dz_.T]), "coefficients": self.coefficients_,
+                  "W": np.vstack([self.Bw_, self.Dw_])}
+        if self.basis_.shifted:
+            values["bias"] = self.bz_
+        return values

@@ -28,9 +28,10 @@ class _Basis:
 
     #: The family's case in the compiled code (see :func:`check_basis`). A
     #: family also says whether its functions stay ``bounded`` however far the
-    #: input goes, and whether they are ``homogeneous`` (scaling the input and
+    #: input goes, whether they are ``homogeneous`` (scaling the input and
     #: each coefficient by the matching power leaves the combination unchanged,
-    #: one more direction per branch that the data cannot fix).
+    #: one more direction per branch that the data cannot fix) and, through
+    #: ``shifted``, whether the branch inputs take a fitted bias.
     code = None
     #: The constructor's parameters, in its order.
     _param_names = ("degree", "constant")
@@ -49,11 +50,18 @@ class _Basis:
         return range(1, self._checked_degree(1) + 1)
 
     def _n_constant(self):
-        if not isinstance(self.constant, (bool, np.bool_)):
-            raise ValueError(
-                f"{type(self).__name__}: constant must be a bool, got {self.constant!r}."
-            )
-        return int(self.constant)
+        return int(self._flag("constant"))
+
+    def _flag(self, name):
+        value = getattr(self, name)
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{type(self).__name__}: {name} must be a bool, got {value!r}.")
+        return bool(value)
+
+    @property
+    def shifted(self):
+        """Whether each branch input has a fitted bias (see ``shift``)."""
+        return False
 
     def _checked_degree(self, lowest):
         degree = self.degree
@@ -181,43 +189,67 @@ class PolynomialBasis(_Basis):
         return degrees
 
 
-class LegendreBasis(_Basis):
-    """Legendre polynomials of degrees 1 to ``degree`` of ``tanh(z)``.
+class _TanhBasis(_Basis):
+    """Polynomials of ``tanh(z + b)``: bounded, with an optional fitted bias."""
+
+    bounded = True
+    homogeneous = False
+    _param_names = ("degree", "constant", "shift")
+
+    def __init__(self, degree=3, *, constant=False, shift=False):
+        self.degree = degree
+        self.constant = constant
+        self.shift = shift
+
+    @property
+    def shifted(self):
+        """Whether each branch input has a fitted bias (see ``shift``)."""
+        return self._flag("shift")
+
+
+_TANH_PARAMETERS = """
+    Parameters
+    ----------
+    degree : int, default=3
+        Highest degree, at least 1.
+    constant : bool, default=False
+        Include the constant {constant} (see :class:`PolynomialBasis`).
+    shift : bool, default=False
+        Give each branch a fitted bias :math:`b_l` of its input, anchored
+        at zero: :math:`f_l(z) = \\sum_k c_{{lk}} ({name}_k(\\tanh(z + b_l)) -
+        {name}_k(\\tanh(b_l)))`. The saturation need not then be centred on
+        the mean operating point, which stays the model's rest state. With
+        ``degree=1``, each branch is one unit :math:`c_l (\\tanh(z + b_l) -
+        \\tanh(b_l))`, and ``n_branches`` of them form a one-hidden-layer
+        network in feedback (see the user guide).
+"""
+
+
+class LegendreBasis(_TanhBasis):
+    __doc__ = """Legendre polynomials of degrees 1 to ``degree`` of ``tanh(z)``.
 
     The squashing keeps every branch bounded, so the model cannot be driven
     to infinity by its nonlinearity when the input leaves the estimation
     range; within the range, ``tanh`` is a smooth change of variable.
-
-    Parameters
-    ----------
-    degree : int, default=3
-        Highest degree, at least 1.
-    constant : bool, default=False
-        Include the constant ``P_0`` (see :class:`PolynomialBasis`).
-    """
+""" + _TANH_PARAMETERS.format(constant="``P_0``", name="P") + """
+    Examples
+    --------
+    >>> from sknlss import LegendreBasis
+    >>> LegendreBasis(1, shift=True)
+    LegendreBasis(degree=1, constant=False, shift=True)
+"""
 
     code = LEGENDRE
-    bounded = True
-    homogeneous = False
 
 
-class ChebyshevBasis(_Basis):
-    """Chebyshev polynomials of degrees 1 to ``degree`` of ``tanh(z)``.
+class ChebyshevBasis(_TanhBasis):
+    __doc__ = """Chebyshev polynomials of degrees 1 to ``degree`` of ``tanh(z)``.
 
     Bounded like :class:`LegendreBasis`; the Chebyshev polynomials weight the
     ends of the range more.
-
-    Parameters
-    ----------
-    degree : int, default=3
-        Highest degree, at least 1.
-    constant : bool, default=False
-        Include the constant ``T_0`` (see :class:`PolynomialBasis`).
-    """
+""" + _TANH_PARAMETERS.format(constant="``T_0``", name="T")
 
     code = CHEBYSHEV
-    bounded = True
-    homogeneous = False
 
 
 def check_basis(basis):

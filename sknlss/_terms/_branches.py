@@ -2,15 +2,21 @@
 
 The terms are ``h(s) = W f(V^T s)`` with ``s = [x; u]``, ``r`` branches and
 ``f_l(z) = sum_k c[l, k] phi_k(z)`` over a univariate basis (see
-:mod:`sknlss._terms._bases`). Written as a linear-fractional model with the
-branch inputs ``z = Cz x + Dz u`` and outputs ``w = f(z)``,
+:mod:`sknlss._terms._bases`). For a basis that shifts (``basis.shifted``),
+each branch input has a bias ``b_l`` and the branch is anchored at ``s = 0``:
+``f_l(z) = sum_k c[l, k] (phi_k(z + b_l) - phi_k(b_l))``, so that ``h(0) = 0``
+and the zero state stays the rest state of the model at the mean input (a
+bias moves the branch along its input, not the model's operating point).
+Written as a linear-fractional model with the branch inputs
+``z = Cz x + Dz u`` (plus ``b``) and outputs ``w = f(z)``,
 
     x(t+1) = A x + B u + Bw w,   y(t) = C x + D u + Dw w,
 
 ``V^T = [Cz, Dz]`` and ``W = [Bw; Dw]``: the NL-LFR model, and the decoupled
 PNLSS model with a power basis. The terms' parameters are
-``[vec(V), vec(c), vec(W)]`` (row-major), so that the parameters entering
-``h_x`` (V, c and the rows of W for the states) come first.
+``[vec(V), b, vec(c), vec(W)]`` (row-major; ``b`` only for a shifting basis),
+so that the parameters entering ``h_x`` (V, b, c and the rows of W for the
+states) come first.
 
 The basis functions of every family (:mod:`sknlss._terms._bases`) are
 compiled here, inlined into the kernels below: numba renews the cache of a
@@ -22,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
-from .._core._model import RangedTerms
+from .._core._model import RangedTerms, parameter_count
 
 #: Codes of the basis families in the compiled code.
 POWERS, LEGENDRE, CHEBYSHEV = 0, 1, 2
@@ -82,52 +88,77 @@ def evaluate_basis(code, degrees, z):
     return out[:, :m].copy(), out[:, m:].copy()
 
 
-# spec = [rank, n_functions, basis code, degrees ...]
+# spec = [rank, n_functions, basis code, shift (0 or 1), degrees ...]
 # work = [lower (r), upper (r), g (r), g' (r), phi (r x n_functions),
-#         phi' (r x n_functions)]; the range [lower, upper] of each branch input,
-# beyond which its function continues linearly, is set by work_init.
-_HEADER = 3
+#         phi' (r x n_functions)], and with shift [g'(b) (r), the basis at the
+#         bias (2 x n_functions)]; the range [lower, upper] of each branch
+#         input, beyond which its function continues linearly, is set by
+#         work_init.
+_HEADER = 4
 
 
 @njit(cache=True, inline="always")
 def _layout(spec, n_vars):
-    rank, n_fun = spec[0], spec[1]
-    o_coef = n_vars * rank
+    """Number of branches and of basis functions, whether the branch inputs
+    have biases, and the offsets of b, c and W in the terms' parameters."""
+    rank, n_fun, shifted = spec[0], spec[1], spec[3] != 0
+    o_bias = n_vars * rank
+    o_coef = o_bias + rank if shifted else o_bias
     o_w = o_coef + rank * n_fun
-    return rank, n_fun, o_coef, o_w
+    return rank, n_fun, shifted, o_bias, o_coef, o_w
 
 
 @njit(cache=True, inline="always")
 def _work_layout(rank, n_fun):
-    """Offsets in ``work`` of g, g', phi and phi'."""
+    """Offsets in ``work`` of g, g', phi, phi', g'(b) and the basis at b."""
     o_phi = 4 * rank
-    return 2 * rank, 3 * rank, o_phi, o_phi + rank * n_fun
+    o_dphi = o_phi + rank * n_fun
+    o_anchor_slope = o_dphi + rank * n_fun
+    return 2 * rank, 3 * rank, o_phi, o_dphi, o_anchor_slope, o_anchor_slope + rank
+
+
+def _work_size(rank, n_fun, shifted):
+    return 4 * rank + 2 * rank * n_fun + (rank + 2 * n_fun if shifted else 0)
+
+
+@njit(cache=True, inline="always")
+def _continued_basis(code, degrees, z, lower, upper, work, o_values, o_slopes):
+    """The basis functions at ``z``, and their slopes, written to ``work``:
+    beyond the range [lower, upper], along their tangents at the nearer end."""
+    inside = min(max(z, lower), upper)
+    basis_functions(code, degrees, inside, work, o_values, o_slopes)
+    if inside != z:
+        for k in range(degrees.shape[0]):
+            work[o_values + k] += work[o_slopes + k] * (z - inside)
 
 
 @njit(EVALUATE, cache=True)
 def _evaluate(theta, spec, s, n, h, work):
     n_vars = s.shape[0]
-    rank, n_fun, o_coef, o_w = _layout(spec, n_vars)
+    rank, n_fun, shifted, o_bias, o_coef, o_w = _layout(spec, n_vars)
     code = spec[2]
     degrees = spec[_HEADER : _HEADER + n_fun]
-    o_g, o_dg, o_phi, o_dphi = _work_layout(rank, n_fun)
+    o_g, o_dg, o_phi, o_dphi, o_anchor_slope, o_anchor = _work_layout(rank, n_fun)
     for l in range(rank):
-        z = 0.0
+        z = theta[o_bias + l] if shifted else 0.0
         for j in range(n_vars):
             z += theta[j * rank + l] * s[j]
-        # Beyond the range [lower, upper] of the branch input, the basis
-        # functions continue along their tangents at the nearer end.
-        inside = min(max(z, work[l]), work[rank + l])
-        basis_functions(code, degrees, inside, work, o_phi + l * n_fun, o_dphi + l * n_fun)
-        if inside != z:
+        o_values, o_slopes = o_phi + l * n_fun, o_dphi + l * n_fun
+        _continued_basis(code, degrees, z, work[l], work[rank + l], work, o_values, o_slopes)
+        if shifted:
+            _continued_basis(code, degrees, theta[o_bias + l], work[l], work[rank + l], work,
+                             o_anchor, o_anchor + n_fun)
+            anchor_slope = 0.0
             for k in range(n_fun):
-                work[o_phi + l * n_fun + k] += work[o_dphi + l * n_fun + k] * (z - inside)
+                work[o_values + k] -= work[o_anchor + k]
+                anchor_slope += theta[o_coef + l * n_fun + k] * work[o_anchor + n_fun + k]
+            work[o_anchor_slope + l] = anchor_slope
         g = 0.0
         dg = 0.0
         for k in range(n_fun):
             c = theta[o_coef + l * n_fun + k]
-            g += c * work[o_phi + l * n_fun + k]
-            dg += c * work[o_dphi + l * n_fun + k]
+            g += c * work[o_values + k]
+            dg += c * work[o_slopes + k]
         work[o_g + l] = g
         work[o_dg + l] = dg
     for i in range(h.shape[0]):
@@ -139,7 +170,7 @@ def _evaluate(theta, spec, s, n, h, work):
 
 @njit(STATE_JACOBIAN, cache=True)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
-    rank, n_fun, _, o_w = _layout(spec, s.shape[0])
+    rank, n_fun, _, _, _, o_w = _layout(spec, s.shape[0])
     o_dg = _work_layout(rank, n_fun)[1]
     for i in range(dh_dx.shape[0]):
         for j in range(n):
@@ -150,11 +181,11 @@ def _state_jacobian(theta, spec, s, n, dh_dx, work):
 
 
 @njit(cache=True, inline="always")
-def _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, first_row, out, out_offset,
-              with_w):
-    """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V, c
-    (and, with ``with_w``, W) added to ``out`` from column ``out_offset``."""
-    o_g, o_dg, o_phi, _ = _work_layout(rank, n_fun)
+def _add_rows(theta, spec, s, work, first_row, out, out_offset):
+    """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V,
+    b, c and W added to ``out`` from column ``out_offset``."""
+    rank, n_fun, shifted, o_bias, o_coef, o_w = _layout(spec, s.shape[0])
+    o_g, o_dg, o_phi, _, o_anchor_slope, _ = _work_layout(rank, n_fun)
     for r in range(out.shape[0]):
         i = first_row + r
         row = out[r]
@@ -163,24 +194,23 @@ def _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, first_row, out, out_offs
             slope = w * work[o_dg + l]
             for j in range(s.shape[0]):
                 row[out_offset + j * rank + l] += slope * s[j]
+            if shifted:
+                row[out_offset + o_bias + l] += slope - w * work[o_anchor_slope + l]
             for k in range(n_fun):
                 row[out_offset + o_coef + l * n_fun + k] += w * work[o_phi + l * n_fun + k]
-            if with_w:
-                row[out_offset + o_w + i * rank + l] += work[o_g + l]
+            row[out_offset + o_w + i * rank + l] += work[o_g + l]
 
 
 @njit(PARAMETER_JACOBIAN, cache=True)
 def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
                         output_offset):
-    rank, n_fun, o_coef, o_w = _layout(spec, s.shape[0])
-    _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, 0, state_out, state_offset, True)
+    _add_rows(theta, spec, s, work, 0, state_out, state_offset)
     if output_offset >= 0:
-        _add_rows(theta, rank, n_fun, o_coef, o_w, s, work, n, output_out, output_offset,
-                  True)
+        _add_rows(theta, spec, s, work, n, output_out, output_offset)
 
 
 class BranchTerms(RangedTerms):
-    """``h(s) = W f(V^T s)`` with ``rank`` univariate branches over ``basis``.
+    """``h(s) = W f(V^T s + b)`` with ``rank`` univariate branches over ``basis``.
 
     Parameters
     ----------
@@ -189,7 +219,8 @@ class BranchTerms(RangedTerms):
     rank : int
         Number of branches.
     basis : basis object
-        Univariate basis of the branches (:mod:`sknlss._terms._bases`).
+        Univariate basis of the branches (:mod:`sknlss._terms._bases`); the
+        biases ``b`` are parameters when ``basis.shifted``.
     input_range : ndarray of shape (2, rank), default=None
         Lower and upper ends of the range of each branch input inside which
         its function is the basis combination; beyond, the function continues
@@ -209,35 +240,47 @@ class BranchTerms(RangedTerms):
     def __init__(self, n_states, n_inputs, n_outputs, rank, basis, input_range=None,
                  reach=1.0):
         degrees = basis.degrees
-        n_vars, n_fun = n_states + n_inputs, len(degrees)
+        shifted = basis.shifted
+        n_fun = len(degrees)
         self.basis = basis
         self.dimensions = (n_states, n_inputs, n_outputs)
         self.rank = rank
-        self.blocks = self.layout(n_states, n_inputs, n_outputs, rank, n_fun)
-        self.spec = np.concatenate([[rank, n_fun, basis.code], degrees]).astype(np.int64)
-        self.work_size = 4 * rank + 2 * rank * n_fun
-        self.n_state_params = n_vars * rank + rank * n_fun + n_states * rank
+        self.blocks = self.layout(n_states, n_inputs, n_outputs, rank, n_fun, shifted)
+        self.spec = np.concatenate([[rank, n_fun, basis.code, shifted],
+                                    degrees]).astype(np.int64)
+        self.work_size = _work_size(rank, n_fun, shifted)
+        # Every block but the rows of W for the outputs enters h_x.
+        self.n_state_params = parameter_count(self.blocks) - n_outputs * rank
         # The range of the branch inputs heads the work.
         self._set_range(input_range, reach, rank)
 
-    def with_input_range(self, values, S, reach=1.0):
-        """The same terms with the range that the branch inputs ``V^T s`` take
-        at the points ``S = [x; u]`` (``V`` from the parameter blocks
-        ``values``), held out to ``reach`` times its half-width."""
+    def branch_inputs(self, values, S):
+        """The branch inputs ``V^T s + b`` at the points ``S = [x; u]``, with
+        ``V`` (and ``b``) from the parameter blocks ``values``."""
         Z = S @ values["V"]
+        return Z + values["bias"] if "bias" in values else Z
+
+    def with_input_range(self, values, S, reach=1.0):
+        """The same terms with the range that the branch inputs take at the
+        points ``S = [x; u]`` (parameter blocks ``values``), held out to
+        ``reach`` times its half-width."""
+        Z = self.branch_inputs(values, S)
         return BranchTerms(*self.dimensions, self.rank, self.basis,
                            np.vstack([Z.min(axis=0), Z.max(axis=0)]), reach)
 
     @staticmethod
-    def layout(n_states, n_inputs, n_outputs, rank, n_functions):
-        """The parameter blocks ``(name, shape)``, known before the terms are built."""
-        return [("V", (n_states + n_inputs, rank)), ("coefficients", (rank, n_functions)),
-                ("W", (n_states + n_outputs, rank))]
+    def layout(n_states, n_inputs, n_outputs, rank, n_functions, shifted=False):
+        """The parameter blocks ``(name, shape)``, known before the terms are
+        built (``shifted``: the branch inputs have biases)."""
+        bias = [("bias", (rank,))] if shifted else []
+        return [("V", (n_states + n_inputs, rank)), *bias,
+                ("coefficients", (rank, n_functions)), ("W", (n_states + n_outputs, rank))]
 
     def decay_mask(self):
         """The branch coefficients and the output directions W are decayed; the
-        input directions V are not (their scale trades with the coefficients')."""
-        (_, (n_vars, rank)), _, _ = self.blocks
+        input directions V and biases b are not (their scale trades with the
+        coefficients', and a bias only moves a branch along its input)."""
         mask = np.ones(self.n_params, dtype=bool)
-        mask[: n_vars * rank] = False
+        mask[: parameter_count([block for block in self.blocks
+                                if block[0] in ("V", "bias")])] = False
         return mask
