@@ -27,8 +27,10 @@ class DataWarning(UserWarning):
 
     A signal whose mean exceeds its standard deviation with ``center=False``;
     ``period`` without ``n_transient``, which prepends nothing for the steady
-    state; an input that does not repeat with ``period``. The fit goes on as
-    the settings say.
+    state; an input that does not repeat with ``period``; a linear model that
+    settles more slowly than the start of a record that a fit without an
+    estimated initial state leaves out of its cost. The fit goes on as the
+    settings say.
     """
 
 

@@ -376,6 +376,17 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # from a PNLSS model's linear part, which may grow).
         limit = int(_MAX_TRANSIENT_SHARE * np.max(np.diff(starts)))
         settled = settling_time + int(np.max(self.input_delay_, initial=0))
+        if np.isfinite(settled) and settled > max(limit, self.n_transient):
+            # (A mode that never settles is the linear part of a start, not of
+            # the data: the decoupled model's PNLSS part may grow.)
+            warn_at_caller(
+                f"{type(self).__name__}: the slowest mode of the linear model that shows "
+                f"in the output settles (to 1 %) in {settled} samples, more than the "
+                f"{limit} samples, a tenth of the longest sequence, that the cost leaves "
+                "out at its start without an estimated initial state. The response to the "
+                "unknown state at the start of the record then enters the cost, and the "
+                "fit bends the model to explain it. Set estimate_x0=True, or n_transient "
+                f"to at least {settled} if the sequences are long enough.", DataWarning)
         return max(self.n_transient, min(settled, limit))
 
     def _sequence_transients(self, starts):
