@@ -67,7 +67,8 @@ _DELAY_TIE = 1.05
 
 
 def _weights(estimate, weighting):
-    """Inverse standard deviation of each FRF sample, or ones."""
+    """Inverse standard deviation of each FRF sample, or ones; zero for the
+    samples not estimated."""
     if weighting == "noise":
         var = estimate.noise_variance
         var = estimate.total_variance if var is None else var
@@ -76,11 +77,13 @@ def _weights(estimate, weighting):
         var = estimate.noise_variance if var is None else var
     else:
         var = None
+    estimated = estimate.estimated
     if var is None:
-        return np.ones(estimate.frf.shape)
-    floor = max(_RELATIVE_VARIANCE_FLOOR * np.mean(np.abs(estimate.frf) ** 2),
-                _ABSOLUTE_VARIANCE_FLOOR)
-    return 1.0 / np.sqrt(np.maximum(var, floor))
+        return np.ones(estimate.frf.shape) if estimated is None else estimated * 1.0
+    frf = estimate.frf if estimated is None else estimate.frf[estimated]
+    floor = max(_RELATIVE_VARIANCE_FLOOR * np.mean(np.abs(frf) ** 2), _ABSOLUTE_VARIANCE_FLOOR)
+    weight = 1.0 / np.sqrt(np.maximum(var, floor))
+    return weight if estimated is None else np.where(estimated, weight, 0.0)
 
 
 @dataclass
@@ -379,9 +382,13 @@ def _parametric(estimate, U, Y, starts, mask, params):
     elif len(starts) > 2:
         x0, output_offset = estimate_initial_state(A, B, C, D, U, Y, starts, mask,
                                                    per_sequence=True)
-    return LinearFit(A, B, C, D, x0, output_offset, hsv, freqs, G, estimate.noise_variance,
-                     estimate.total_variance, ss_frf(A, B, C, D, freqs), n_iter,
-                     loss_history, error)
+    noise, total = estimate.noise_variance, estimate.total_variance
+    if estimate.estimated is not None:
+        # The entries not estimated are shown as such.
+        G, noise, total = (None if value is None else np.where(estimate.estimated, value, np.nan)
+                           for value in (G, noise, total))
+    return LinearFit(A, B, C, D, x0, output_offset, hsv, freqs, G, noise, total,
+                     ss_frf(A, B, C, D, freqs), n_iter, loss_history, error)
 
 
 def _simulation_nrmse(A, B, C, D, U, Y, starts, mask, x0, offset):
@@ -562,7 +569,9 @@ class BLAEstimator(_BaseStateSpace):
     frequencies_ : ndarray of shape (n_freq,)
         Frequencies of the nonparametric FRF, in cycles per sample.
     frf_ : ndarray of shape (n_freq, n_outputs, n_inputs), complex
-        Nonparametric BLA in the user's units.
+        Nonparametric BLA in the user's units; NaN (as its variances) where
+        an input has no power of its own while others do (Local Polynomial
+        Method with inputs of different bands, see the user guide).
     noise_variance_ : ndarray of shape (n_freq, n_outputs, n_inputs) or None
         Variance of ``frf_`` due to the noise (robust method with at least two
         periods). For the LPM, the noise and the nonlinear distortions cannot

@@ -58,12 +58,18 @@ class FRFEstimate:
     total_variance : ndarray of shape (n_freq, n_outputs, n_inputs) or None
         Variance of ``frf`` due to the noise and the nonlinear distortions
         (None when it cannot be estimated).
+    estimated : ndarray of bool of shape (n_freq, n_outputs, n_inputs) or None
+        Which entries of ``frf`` are estimated: an input without power of its
+        own near a frequency has no FRF there, though others do (several
+        inputs of different bands); its entries are zero and not estimated.
+        None: every entry.
     """
 
     frequencies: np.ndarray
     frf: np.ndarray
     noise_variance: np.ndarray | None
     total_variance: np.ndarray | None
+    estimated: np.ndarray | None = None
 
 
 def _band_mask(bins, n_dft, max_frequency):
@@ -239,7 +245,7 @@ def _lpm_windows(Uf, Yf, centres, width, order):
     """LPM fits of the windows centred on the bins ``centres`` (0-based in
     ``Uf`` and ``Yf``): FRF, noise variance of the outputs, the variance gain
     of each FRF unknown, degrees of freedom, whether the regressors are rank
-    deficient, and the input power of each window."""
+    deficient, and the power of each input in each window."""
     n_bins, n_u = Uf.shape
     half = width // 2
     # window of bin k: the `width` bins closest to it that lie in 1..n_bins
@@ -268,14 +274,15 @@ def _lpm_windows(Uf, Yf, centres, width, order):
     # diag of (K^H K)^+ for the FRF unknowns
     gain = np.sum(np.abs(np.conj(Vh[:, :, :n_u])) ** 2 * inv_s[..., None] ** 2, axis=1)
     G = coef[:, :n_u, :].transpose(0, 2, 1)  # (bin, n_y, n_u)
-    window_power = np.sum(np.abs(Uw) ** 2, axis=(1, 2))
+    window_power = np.sum(np.abs(Uw) ** 2, axis=1)
     return G, noise_var, gain, dof, rank < min(K.shape[1:]), window_power
 
 
 def _lpm_record(U, Y, order, bandwidth, max_frequency):
     """LPM on one record, on its bins below ``max_frequency``: (frequencies,
-    FRF, variance or None, input power of each bin's window), and whether its
-    inputs are collinear in every window (which then has no power)."""
+    FRF, variance or None, power of each input in each bin's window), and
+    whether its inputs are collinear in every window (which then has no
+    power)."""
     n, n_u = U.shape
     n_bins = (n - 1) // 2  # positive bins below Nyquist
     width, order = lpm_window(n_u, order, n_bins, bandwidth)
@@ -288,7 +295,7 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
         # the bins out of the band would have had.
         empty = np.empty((0, Y.shape[1], n_u), dtype=complex)
         variance = np.empty(empty.shape) if width > _lpm_unknowns(n_u, order) else None
-        return (np.empty(0), empty, variance, np.empty(0)), False
+        return (np.empty(0), empty, variance, np.empty((0, n_u))), False
     # The windows' regressors, factors and residuals take about 2 kB per
     # bin; fitted a block of bins at a time, the memory stays that of the
     # record's DFT however long the record.
@@ -320,8 +327,8 @@ def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_fre
     Returns
     -------
     records : list of tuple
-        Per sequence: frequencies, FRF, variance (or None) and the input
-        power of each bin's window.
+        Per sequence: frequencies, FRF, variance (or None) and the power of
+        each input in each bin's window.
     """
     records, collinear = zip(*(
         _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
@@ -341,15 +348,24 @@ def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_fre
 def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
     """The FRF estimate of :func:`lpm_records` on the bins whose window holds
     at least ``power_threshold`` times the largest window power of their
-    record; estimates at equal frequencies combined (see :func:`lpm_frf`)."""
+    record; estimates at equal frequencies combined (see :func:`lpm_frf`).
+
+    With several inputs, the entries of an input whose own window power there
+    is below ``power_threshold`` times its largest are not estimated: where an
+    input has no power of its own, the regression's pseudo-inverse sets its
+    FRF to zero, with a variance that does not show it."""
     parts = []
     for freqs, G, var, power in records:
-        keep = power > power_threshold * power.max(initial=0.0)
-        parts.append((freqs[keep], G[keep], None if var is None else var[keep]))
+        total = np.sum(power, axis=1)
+        keep = total > power_threshold * total.max(initial=0.0)
+        own = power[keep] > power_threshold * power.max(axis=0, initial=0.0)
+        parts.append((freqs[keep], G[keep], None if var is None else var[keep],
+                      np.broadcast_to(own[:, None, :], G[keep].shape)))
     freqs = np.concatenate([p[0] for p in parts])
     if freqs.size == 0:
         raise ValueError("The input X has no power on any usable frequency bin.")
     G = np.concatenate([p[1] for p in parts])
+    estimated = np.concatenate([p[3] for p in parts])
     if any(p[2] is None for p in parts):
         var = None
         weight = np.ones(G.shape)
@@ -358,13 +374,19 @@ def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
         weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
     unique, group = np.unique(freqs, return_inverse=True)
     if unique.size < freqs.size:
+        if not estimated.all():
+            weight = weight * estimated
         wsum = np.zeros((unique.size,) + G.shape[1:])
         np.add.at(wsum, group, weight)
         Gsum = np.zeros((unique.size,) + G.shape[1:], dtype=complex)
         np.add.at(Gsum, group, weight * G)
-        G = Gsum / wsum
-        var = None if var is None else 1.0 / wsum
-    return FRFEstimate(unique, G, var, var)
+        estimated = wsum > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            G = Gsum / wsum
+            var = None if var is None else 1.0 / wsum
+    if estimated.all():
+        return FRFEstimate(unique, G, var, var)
+    return FRFEstimate(unique, np.where(estimated, G, 0.0), var, var, estimated.copy())
 
 
 def lpm_frf(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None,

@@ -70,9 +70,10 @@ def ss_frf(A, B, C, D, frequencies):
     return C @ resolvent_B + D
 
 
-def _frequency_weights(weight):
-    """One positive weight per frequency from element weights (n_freq, n_y, n_u)."""
-    return np.sqrt(np.mean(weight**2, axis=(1, 2)))
+def _column_weights(weight):
+    """One weight per frequency and input from element weights (n_freq, n_y,
+    n_u): zero for an input whose FRF is not estimated there."""
+    return np.sqrt(np.mean(weight**2, axis=1))
 
 
 def _fit_bd(A, C, frequencies, G, weight):
@@ -131,22 +132,25 @@ def frf_subspace(frequencies, G, weight, n_states):
     n_freq, n_y, n_u = G.shape
     q = n_block_rows(n_states, n_freq, n_u)
     z = np.exp(2j * np.pi * frequencies)
-    w = _frequency_weights(weight)
+    w = _column_weights(weight)
     Wz = z[None, :] ** np.arange(q)[:, None]  # (q, F)
-    # column block k: [G_k; z G_k; ...] and [I; z I; ...], scaled by w_k; scaling
-    # a column of both data matrices keeps the subspace equation exact
-    Yb = (Wz[:, None, :, None] * (w[:, None, None] * G).transpose(1, 0, 2)[None])
+    # column (k, j): [G_k e_j; z G_k e_j; ...] and [e_j; z e_j; ...], scaled by
+    # w_kj; scaling a column of both data matrices keeps the subspace equation
+    # exact, and an input's FRF that is not estimated at k drops out
+    Yb = (Wz[:, None, :, None] * (w[:, None, :] * G).transpose(1, 0, 2)[None])
     Yb = Yb.reshape(q * n_y, n_freq * n_u)
-    Ub = (Wz[:, None, :, None] * (w[:, None, None] * np.eye(n_u)[None]).transpose(1, 0, 2)[None])
+    Ub = (Wz[:, None, :, None] * (w[:, None, :] * np.eye(n_u)[None]).transpose(1, 0, 2)[None])
     Ub = Ub.reshape(q * n_u, n_freq * n_u)
     data = np.vstack([np.hstack([Ub.real, Ub.imag]), np.hstack([Yb.real, Yb.imag])])
     R = np.linalg.qr(data.T, mode="r").T
     R22 = R[q * n_u :, q * n_u :]
     # Pintelon (2002): whiten the rows by the covariance of the weighted noise,
-    # Re(sum_k W_k W_k^H) (x) I (each weighted sample has unit variance)
+    # Re(sum_k m_k W_k W_k^H) (x) I (each weighted sample has unit variance;
+    # m_k the share of the inputs whose FRF is estimated at k)
     # (a clipped eigen-factor: with frequencies crowded near DC the rows of the
     # data matrix are nearly collinear and the covariance is ill-conditioned)
-    vals, vecs = np.linalg.eigh(np.kron(np.real(Wz @ Wz.conj().T), np.eye(n_y)))
+    share = np.mean(w > 0, axis=1)
+    vals, vecs = np.linalg.eigh(np.kron(np.real((Wz * share) @ Wz.conj().T), np.eye(n_y)))
     root = np.sqrt(np.clip(vals, 1e-12 * vals[-1], None))
     left = np.linalg.svd((vecs / root).T @ R22, full_matrices=False)[0]
     O = (vecs * root) @ left[:, :n_states]
