@@ -14,9 +14,26 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import LinAlgError, qr, svd
 from sklearn.exceptions import ConvergenceWarning
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from ..exceptions import warn_at_caller
+
+_THREADPOOLS = []
+
+
+def one_blas_thread():
+    """A context in which BLAS runs on one thread.
+
+    The factorisations of the library are small, and threads only add
+    synchronisation (tenfold on two cores, see DESIGN.md §2). The controller
+    is made once, at the first call (after NumPy's and SciPy's BLAS have
+    loaded): making one scans the loaded libraries, about 2 ms, more than a
+    small search takes (an initial state per sequence of a long record).
+    """
+    if not _THREADPOOLS:
+        _THREADPOOLS.append(ThreadpoolController())
+    return _THREADPOOLS[0].limit(limits=1, user_api="blas")
+
 
 # Damping is raised by this factor after a rejected step and lowered by
 # _DAMPING_DOWN after an accepted one (the usual asymmetric schedule).
@@ -218,7 +235,7 @@ def levenberg_marquardt(
     damping = None
     converged = stopped_early = False
     n_iter = 0
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         while n_iter < max_iter:
             if not np.all(np.isfinite(J)):
                 # The sensitivities of the current iterate overflowed although

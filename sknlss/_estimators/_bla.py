@@ -13,9 +13,9 @@ from numbers import Real
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
-from threadpoolctl import threadpool_limits
 
 from .._core._model import StateSpaceModel, parameter_count
+from .._core._optimize import one_blas_thread
 from .._core._sequences import delayed_input, transient_mask
 from .._linear._frf import (
     EXCITATION_THRESHOLD,
@@ -204,9 +204,7 @@ def fit_linear_model(U, Y, starts, params, first_rows=None):
     -------
     fit : LinearFit
     """
-    # The factorisations here are small: multithreaded BLAS only adds
-    # synchronisation cost (tenfold on two cores, see DESIGN.md §2).
-    with (threadpool_limits(limits=1, user_api="blas"),
+    with (one_blas_thread(),
           explained(lambda: _delay_note(starts, params))):
         try:
             return _fit_linear_model(U, Y, starts, params, first_rows)

@@ -21,9 +21,9 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.neural_network import MLPRegressor
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
-from threadpoolctl import threadpool_limits
 
 from .._core._model import parameter_count
+from .._core._optimize import one_blas_thread
 from .._core._sequences import every_sequence, part_before_holdout
 from .._linear._state_estimation import estimate_states
 from .._terms._network import ACTIVATIONS, NetworkTerms
@@ -77,7 +77,7 @@ def _fit_networks(states, U, Y, starts, linear, n_neurons, activation, random_st
         )
         # Only a starting point: an unconverged fit is as good as any other.
         # These tiny problems run several times faster on one BLAS thread.
-        with warnings.catch_warnings(), threadpool_limits(limits=1, user_api="blas"):
+        with warnings.catch_warnings(), one_blas_thread():
             warnings.simplefilter("ignore", ConvergenceWarning)
             net.fit(inputs, target)
         W.append(net.coefs_[0].T)

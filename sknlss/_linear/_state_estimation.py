@@ -13,7 +13,8 @@ O(N n^2) memory.
 
 import numpy as np
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
-from threadpoolctl import threadpool_limits
+
+from .._core._optimize import one_blas_thread
 
 
 # Squared Cholesky pivots (Schur complements) below this fraction of the
@@ -142,7 +143,7 @@ def estimate_states(U, Y, starts, A, B, C, D, alpha, *, ridge=0.0):
     states = np.empty((U.shape[0], n))
     # Thin products and a narrow band: extra BLAS threads only add overhead
     # (several times slower on a loaded 2-core machine).
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         for begin, end in zip(starts[:-1], starts[1:]):
             states[begin:end] = _solve_sequence(U[begin:end], Y[begin:end], A, B, C, D,
                                                 alpha, ridge)
