@@ -41,7 +41,15 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     n_states : int, default=2
         Model order n.
     degree : int or tuple of int, default=(2, 3)
-        Total degrees of the monomials in zeta and eta.
+        Total degrees of the monomials in zeta and eta. The full terms grow
+        fast with the order: ``n_zeta = sum_d C(n + n_u + d - 1, d)``
+        monomials over the degrees d, each with a coefficient per state and
+        output. With one input and output and ``degree=(2, 3)``, that is 30
+        monomials and 136 parameters at ``n_states=3``, 833 parameters at 6
+        and 1971 at 8, where one iteration on 8192 samples took about 0.8 and
+        6.8 s (the factorisations of the Jacobian cost about ``rows * p^2 +
+        p^3`` for ``p`` parameters). ``"no_cross_products"`` terms or a
+        :class:`DecoupledPNLSS` keep a high order small.
     state_terms : {"full", "states_only", "no_cross_products", "inputs_only", \
             "empty"} or array-like of shape (n_zeta, n_states + n_inputs), \
             default="full"
