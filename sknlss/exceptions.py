@@ -28,7 +28,7 @@ class DataWarning(UserWarning):
     A signal whose mean exceeds its standard deviation with ``center=False``;
     ``period`` without ``n_transient``, which prepends nothing for the steady
     state; an input that does not repeat with ``period``; a linear model that
-    settles more slowly than the start of a record that a fit without an
+    settles over more than twice the start of a record that a fit without an
     estimated initial state leaves out of its cost. The fit goes on as the
     settings say.
     """

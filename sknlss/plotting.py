@@ -124,9 +124,12 @@ def _db(values, power=False):
 
 
 def _bla_entry(bla, name, n_freq, output_index, input_index):
-    """Entry (output, input) of the finite attribute ``name`` of shape (n_freq, n_y, n_u).
+    """Entry (output, input) of the attribute ``name`` of shape (n_freq, n_y, n_u).
 
     None when the attribute is absent or None (a level that was not estimated).
+    NaN marks a frequency where the entry was not estimated (an input without
+    power of its own there, see :class:`~sknlss.BLAEstimator`); infinity is
+    refused.
     """
     values = getattr(bla, name, None)
     if values is None:
@@ -144,8 +147,8 @@ def _bla_entry(bla, name, n_freq, output_index, input_index):
             f"bla.{name} must have shape (n_freq, n_outputs, n_inputs) or (n_freq,) "
             f"with n_freq={n_freq}, got {values.shape}."
         )
-    if not np.all(np.isfinite(values)):
-        raise ValueError(f"bla.{name} has non-finite values (NaN or infinity).")
+    if np.any(np.isinf(values)):
+        raise ValueError(f"bla.{name} has infinite values.")
     return values
 
 
@@ -185,7 +188,9 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
         ``frf_``, ``frf_model_``, ``noise_variance_`` and ``total_variance_``.
         Levels that could not be estimated (None) are not drawn, and a noise
         variance equal to the total variance (the Local Polynomial Method
-        cannot separate them) is drawn once, as the total level.
+        cannot separate them) is drawn once, as the total level. Frequencies
+        where the entry was not estimated (NaN: an input without power of its
+        own there, while others have) are left as gaps.
     sampling_time : float, default=None
         Sampling time in seconds. When given, frequencies are shown in Hz,
         otherwise in cycles per sample.
@@ -206,7 +211,7 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
     ------
     ValueError
         If ``bla`` is not fitted, its attributes have inconsistent shapes or
-        non-finite values, an index is out of range, or ``sampling_time`` is
+        infinite values, an index is out of range, or ``sampling_time`` is
         not positive.
 
     See Also
@@ -256,7 +261,8 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
         raise ValueError("plot_frf needs a fitted BLAEstimator; bla.frf_ is None.")
     # The LPM cannot separate noise from distortion and reports the same
     # variance twice; drawing it once avoids suggesting a noise floor.
-    if noise is not None and total is not None and np.array_equal(noise, total):
+    if noise is not None and total is not None and np.array_equal(noise, total,
+                                                                    equal_nan=True):
         noise = None
 
     ax = _single_axes(ax)

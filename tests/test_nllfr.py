@@ -183,6 +183,8 @@ def test_a_grid_search_sets_the_basis_parameters(records):
     (PolynomialBasis(2, kind="odd"), "needs degree >= 3"),
     (PolynomialBasis(3, kind="cubic"), "kind must be"),
     (LegendreBasis(0), "degree must be an int >= 1"),
+    (LegendreBasis(2, constant=True, shift=True), "constant=True with shift=True"),
+    (ChebyshevBasis(2, shift=1), "shift must be a bool"),
 ])
 def test_bad_basis(basis, message, records):
     u, y, _, _ = records

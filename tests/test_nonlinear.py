@@ -420,6 +420,29 @@ def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
     assert cost_transient(estimate_x0=True) == 0
 
 
+@pytest.mark.parametrize("lengths, settled, warns", [
+    ((1000,), 150, False),  # 100 of 150 samples: 0.01 ** (100 / 150) = 0.05 is left
+    ((1000,), 250, True),  # 0.16 is left
+    ((3000, 1000), 250, True),  # the shorter sequence leaves out 100
+    ((3000, 3000), 250, False),
+])
+def test_a_warning_when_the_cost_sees_much_of_the_start_transient(lengths, settled, warns):
+    starts = np.concatenate([[0], np.cumsum(lengths)])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        # Only the first: n_transient or the initial state take the transient.
+        for params in ({}, {"n_transient": settled}, {"estimate_x0": True}):
+            model = PNLSSRegressor(2, **params)
+            model.input_delay_ = np.array([0])  # as fit sets it
+            model._cost_transient(settled, starts)
+    messages = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    assert len(messages) == warns
+    if warns:
+        assert f"settles (to 1 %) in {settled} samples" in messages[0]
+        assert "leaves out only the first 100 of" in messages[0]
+        assert "estimate_x0=True" in messages[0]
+
+
 def _linear_model(A, B=None, C=None):
     """A linear model keyed by block name, one input and one output; B and C
     of ones by default."""

@@ -94,6 +94,19 @@ def test_plot_frf_mimo_entry_and_existing_axes():
         plot_frf(bla, output_index=2)
 
 
+def test_plot_frf_leaves_the_entries_not_estimated_as_gaps():
+    # NaN where an input has no power of its own (several inputs of
+    # different bands): the levels are drawn once, with gaps.
+    bla = _fake_bla()
+    bla.total_variance_ = bla.noise_variance_
+    for name in ("frf_", "noise_variance_"):
+        getattr(bla, name)[5:9] = np.nan
+    lines = plot_frf(bla).axes[0].get_lines()
+    assert len(lines) == 3
+    assert np.isnan(lines[0].get_ydata()[5:9]).all()
+    assert np.isfinite(lines[0].get_ydata()[:5]).all()
+
+
 def test_plot_frf_rejects_unfitted_or_invalid_input():
     with pytest.raises(ValueError, match="fitted BLAEstimator"):
         plot_frf(object())
@@ -101,8 +114,8 @@ def test_plot_frf_rejects_unfitted_or_invalid_input():
     with pytest.raises(ValueError, match=r"plot_frf\(model\.bla_\)"):
         plot_frf(SimpleNamespace(bla_=_fake_bla()))
     bla = _fake_bla()
-    bla.frf_[3] = np.nan
-    with pytest.raises(ValueError, match=r"bla\.frf_ has non-finite"):
+    bla.frf_[3] = np.inf
+    with pytest.raises(ValueError, match=r"bla\.frf_ has infinite"):
         plot_frf(bla)
     bla = _fake_bla()
     bla.noise_variance_ = bla.noise_variance_[:5]

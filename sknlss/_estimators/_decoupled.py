@@ -227,7 +227,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         ``x0_``. Without ``estimate_x0`` and ``period``, the cost also skips
         the settling time of the linear model's slowest mode that shows in its
         output (to 1 %, at most a tenth of each sequence, with a DataWarning
-        when it is longer).
+        when it is over twice as long).
     verbose : int, default=0
         Print the progress of the optimisation when positive: every iteration
         of every start (where the start runs, a joblib worker with

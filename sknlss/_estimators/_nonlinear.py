@@ -63,6 +63,10 @@ _MIN_SPLIT_LENGTH = 100
 #: fraction, at most this share of each sequence.
 _SETTLED = 1e-2
 _MAX_TRANSIENT_SHARE = 0.1
+#: Without an estimated initial state, a DataWarning says that the cost sees
+#: the start transient when more than this share of it is left where the
+#: skipped samples end (the slowest mode decaying geometrically).
+_TRANSIENT_LEFT = 0.1
 #: Relative margin above the linear start's error on the cost rows within which
 #: a model still counts as fitting them as well (rounding of the simulations).
 _ROUNDING_MARGIN = 1e-9
@@ -372,22 +376,34 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         too)."""
         if self.estimate_x0 or self.period is not None:
             return self.n_transient
-        # A mode that does not decay never settles (the decoupled model starts
-        # from a PNLSS model's linear part, which may grow).
         limit = int(_MAX_TRANSIENT_SHARE * np.max(np.diff(starts)))
         settled = settling_time + int(np.max(self.input_delay_, initial=0))
-        if np.isfinite(settled) and settled > max(limit, self.n_transient):
-            # (A mode that never settles is the linear part of a start, not of
-            # the data: the decoupled model's PNLSS part may grow.)
-            warn_at_caller(
-                f"{type(self).__name__}: the slowest mode of the linear model that shows "
-                f"in the output settles (to 1 %) in {settled} samples, more than the "
-                f"{limit} samples, a tenth of the longest sequence, that the cost leaves "
-                "out at its start without an estimated initial state. The response to the "
-                "unknown state at the start of the record then enters the cost, and the "
-                "fit bends the model to explain it. Set estimate_x0=True, or n_transient "
-                f"to at least {settled} if the sequences are long enough.", DataWarning)
+        # A mode that does not decay never settles: it belongs to the linear
+        # part of a start (the decoupled model's PNLSS part may grow), not to
+        # the data, and the tenth is left out.
+        if np.isfinite(settled):
+            self._warn_if_transient_left(settled, starts)
         return max(self.n_transient, min(settled, limit))
+
+    def _warn_if_transient_left(self, settled, starts):
+        """Warn when, at the end of the samples left out of the cost at the
+        start of the shortest sequence, more than ``_TRANSIENT_LEFT`` of the
+        response to its unknown initial state is left (the slowest mode
+        decays to ``_SETTLED`` in ``settled`` samples)."""
+        lengths = np.diff(starts)
+        skipped = max(self.n_transient,
+                      min(settled, int(_MAX_TRANSIENT_SHARE * np.min(lengths))))
+        if _SETTLED ** (skipped / max(settled, 1)) <= _TRANSIENT_LEFT:
+            return
+        which = "every sequence" if np.all(lengths == lengths[0]) else "the shortest sequence"
+        warn_at_caller(
+            f"{type(self).__name__}: the slowest mode of the linear model that shows in the "
+            f"output settles (to 1 %) in {settled} samples, and the cost leaves out only the "
+            f"first {skipped} of {which} (without an estimated initial state, at most a "
+            "tenth of a sequence): more than a tenth of the response to the unknown state at "
+            "the start of the record enters the cost, and the fit bends the model to explain "
+            f"it. Set estimate_x0=True, or n_transient to at least {settled} if the "
+            "sequences are long enough.", DataWarning)
 
     def _sequence_transients(self, starts):
         """Samples left out of the cost at the start of each sequence:

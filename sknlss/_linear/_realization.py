@@ -72,8 +72,12 @@ def ss_frf(A, B, C, D, frequencies):
 
 def _column_weights(weight):
     """One weight per frequency and input from element weights (n_freq, n_y,
-    n_u): zero for an input whose FRF is not estimated there."""
-    return np.sqrt(np.mean(weight**2, axis=1))
+    n_u): the RMS of the frequency's weights over the inputs whose FRF is
+    estimated there (a nonzero weight), zero for the others."""
+    estimated = np.any(weight > 0, axis=1)
+    n_estimated = np.maximum(np.sum(estimated, axis=1), 1)
+    rms = np.sqrt(np.sum(weight**2, axis=(1, 2)) / (weight.shape[1] * n_estimated))
+    return rms[:, None] * estimated
 
 
 def _fit_bd(A, C, frequencies, G, weight):

@@ -204,7 +204,13 @@ class _TanhBasis(_Basis):
     @property
     def shifted(self):
         """Whether each branch input has a fitted bias (see ``shift``)."""
-        return self._flag("shift")
+        shift = self._flag("shift")
+        if shift and self._flag("constant"):
+            raise ValueError(
+                f"{type(self).__name__}: constant=True with shift=True: a shifted branch "
+                "is anchored at zero, so its constant cancels. Leave constant=False (with "
+                "estimate_x0=True the model estimates an output offset).")
+        return shift
 
 
 _TANH_PARAMETERS = """
@@ -218,7 +224,8 @@ _TANH_PARAMETERS = """
         Give each branch a fitted bias :math:`b_l` of its input, anchored
         at zero: :math:`f_l(z) = \\sum_k c_{{lk}} ({name}_k(\\tanh(z + b_l)) -
         {name}_k(\\tanh(b_l)))`. The saturation need not then be centred on
-        the mean operating point, which stays the model's rest state. With
+        the mean operating point, which stays the model's rest state (the
+        constant cancels: ``constant=True`` is refused with it). With
         ``degree=1``, each branch is one unit :math:`c_l (\\tanh(z + b_l) -
         \\tanh(b_l))`, and ``n_branches`` of them form a one-hidden-layer
         network in feedback (see the user guide).

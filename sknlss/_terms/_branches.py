@@ -263,8 +263,12 @@ class BranchTerms(RangedTerms):
     def with_input_range(self, values, S, reach=1.0):
         """The same terms with the range that the branch inputs take at the
         points ``S = [x; u]`` (parameter blocks ``values``), held out to
-        ``reach`` times its half-width."""
+        ``reach`` times its half-width. The range of a shifted branch also
+        holds its bias, the input at ``s = 0`` where it is anchored, so that
+        the anchor is the value the fit used."""
         Z = self.branch_inputs(values, S)
+        if "bias" in values:
+            Z = np.vstack([Z, values["bias"]])
         return BranchTerms(*self.dimensions, self.rank, self.basis,
                            np.vstack([Z.min(axis=0), Z.max(axis=0)]), reach)
 
