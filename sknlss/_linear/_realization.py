@@ -125,7 +125,8 @@ def frf_subspace(frequencies, G, weight, n_states):
     G : ndarray of shape (n_freq, n_y, n_u), complex
         FRF samples.
     weight : ndarray of shape (n_freq, n_y, n_u)
-        Inverse standard deviation of each FRF sample.
+        Inverse standard deviation of each FRF sample; zero for the samples
+        not estimated (an input without power of its own at a frequency).
     n_states : int
         Model order.
 
