@@ -421,6 +421,7 @@ def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
 
 
 @pytest.mark.parametrize("lengths, settled, warns", [
+    ((1000,), 0, False),
     ((1000,), 150, False),  # 100 of 150 samples: 0.01 ** (100 / 150) = 0.05 is left
     ((1000,), 250, True),  # 0.16 is left
     ((3000, 1000), 250, True),  # the shorter sequence leaves out 100

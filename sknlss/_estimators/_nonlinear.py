@@ -393,7 +393,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         lengths = np.diff(starts)
         skipped = max(self.n_transient,
                       min(settled, int(_MAX_TRANSIENT_SHARE * np.min(lengths))))
-        if _SETTLED ** (skipped / max(settled, 1)) <= _TRANSIENT_LEFT:
+        if skipped >= settled or _SETTLED ** (skipped / settled) <= _TRANSIENT_LEFT:
             return
         which = "every sequence" if np.all(lengths == lengths[0]) else "the shortest sequence"
         warn_at_caller(
