@@ -7,7 +7,8 @@ Approximation (BLA) of the system. Cascaded Tanks has one non-periodic
 estimation record that does not start at rest, so the nonparametric BLA is
 estimated with the Local Polynomial Method, which also removes the transient.
 A third-order balanced state-space model is then fitted to it (16 parameters,
-as in the paper's Table 2, and 3 more for the initial state), and simulated on
+as in the paper's Table 2, and 4 more for the initial state and the output
+offset), and simulated on
 the estimation and test records.
 """
 

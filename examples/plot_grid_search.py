@@ -98,8 +98,8 @@ def run_search(estimator, param_grid):
 # %%
 # NLSS2: the state-estimation weight ``alpha`` and the number of neurons, with
 # the initial state estimated (third order, as in the paper). Some settings
-# still improve on their held-out end after the default 100 iterations, and a
-# few slowly after 200: their ``ConvergenceWarning`` is counted.
+# still improve on their held-out end after the default 100 iterations, and
+# some may still after 200: their ``ConvergenceWarning`` is counted.
 nlss2_search = run_search(
     NLSS2Regressor(n_states=3, estimate_x0=True, n_init=1, max_iter=200, random_state=0),
     {"alpha": [1.0, 10.0, 100.0], "n_neurons": [1, 2]},

@@ -10,7 +10,7 @@ validation (choosing between the time-domain and the frequency-weighted cost)
 and realization 3 only for the final test.
 
 The linear model (BLA) cannot go below the level of the nonlinear
-distortions, about 3e-2; a PNLSS model of the right structure reaches the
+distortions, about 2e-2; a PNLSS model of the right structure reaches the
 noise level, about 1e-4.
 """
 

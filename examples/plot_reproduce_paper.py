@@ -28,7 +28,7 @@ import warnings
 import matplotlib.pyplot as plt
 import numpy as np
 
-from sknlss import BLAEstimator, LinearFallbackWarning, PNLSSRegressor
+from sknlss import BLAEstimator, DataWarning, LinearFallbackWarning, PNLSSRegressor
 from sknlss.benchmarks import load_benchmark, reproduce
 from sknlss.metrics import rms_error
 
@@ -57,12 +57,18 @@ def show(value):
 # 30% (``validation_fraction=0.3``, the paper's split, for all its starts
 # instead of the shares the default gives them in turn): its cost uses the
 # first 70%, and the start and iterate with the lowest error on the last 30%
-# are kept.
+# are kept. As in the paper, neither estimates the initial state: the PNLSS
+# cost leaves out the first tenth of the record, less than its linear start
+# takes to settle, which the fit's :class:`~sknlss.DataWarning` would point
+# out (silenced here: Table 3 and Table 4 estimate the state).
 start = time.perf_counter()
 n_fit = n_est - int(round(0.3 * n_est))
 bla = BLAEstimator(n_states=3).fit(data.X_est[:n_fit], data.y_est[:n_fit])
 pnlss = PNLSSRegressor(n_states=3, degree=(2, 3), validation_fraction=0.3,
-                       random_state=0).fit(data.X_est, data.y_est)
+                       random_state=0)
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore", DataWarning)
+    pnlss.fit(data.X_est, data.y_est)
 table2 = {"BLA": (bla.n_params_, *split_errors(bla, n_fit)),
           "PNLSS": (pnlss.n_params_, *split_errors(pnlss, n_fit))}
 paper2 = {"BLA": (16, 0.54708, 0.75743, 0.75331),
@@ -122,7 +128,8 @@ for fit in linear_kept:
 # --------------------------------------------
 # Every model is fitted on the whole estimation record with its defaults and
 # the paper's structure (selection on held-out ends of that record, initial
-# state estimated there and reused on the test record). ``test[50:]`` is the
+# state estimated there and reused on the test record, except for the PNLSS
+# model, the paper's PNLSS without it). ``test[50:]`` is the
 # nonlinear_benchmarks variant that lets the first 50 test samples set the
 # state (the initial state that fits them). One random state keeps this
 # example short; the main job (``python -m sknlss reproduce``) fits every

@@ -153,6 +153,5 @@ ax.set_xlabel("branch input z (normalised units)")
 ax.set_ylabel("branch output w = f(z)")
 ax.grid(True, alpha=0.3)
 ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
-ax.set_title(f"NL-LFR nonlinearity over the range of z on '{record}' "
-             f"(the model: {applied})")
+ax.set_title(f"NL-LFR branch f(z) on '{record}'\n(the model: {applied})")
 plt.show()

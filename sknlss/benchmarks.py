@@ -6,8 +6,9 @@ states, and reports the RMS error of the simulated output on its test records
 as the median and the range over the random states. ``python -m sknlss
 reproduce`` is a thin command line over :func:`reproduce`.
 
-- Cascaded Tanks (DESIGN.md §3): the initial state is estimated on the
-  estimation record and reused on the test record; the RMS error is reported
+- Cascaded Tanks (the paper's protocol): the initial state is estimated on
+  the estimation record and reused on the test record (except for the PNLSS
+  model without it, the paper's PNLSS); the RMS error is reported
   over all test samples and, as in the nonlinear_benchmarks protocol, over the
   samples after the first ``init_window``, which set the state. Volts.
 - Silverbox: every test record is simulated from its start, from the initial
@@ -40,7 +41,7 @@ from sklearn.utils.parallel import Parallel, delayed
 
 from ._validation import POSITIVE_FINITE
 from .datasets import fetch_cascaded_tanks, fetch_silverbox, make_cascaded_tanks, make_duffing
-from .exceptions import SimulationDivergedWarning
+from .exceptions import DataWarning, SimulationDivergedWarning
 from .metrics import rms_error
 
 __all__ = ["Benchmark", "evaluate", "format_table", "load_benchmark", "reproduce"]
@@ -50,7 +51,7 @@ def _tanks_models():
     from . import BLAEstimator, DecoupledPNLSS, NLLFRRegressor, NLSS2Regressor, PNLSSRegressor
 
     return [
-        ("BLA", lambda seed: BLAEstimator(n_states=2, estimate_x0=True)),
+        ("BLA", lambda seed: BLAEstimator(n_states=3, estimate_x0=True)),
         ("PNLSS", lambda seed: PNLSSRegressor(n_states=3, degree=(2, 3),
                                               random_state=seed)),
         ("PNLSS-I", lambda seed: PNLSSRegressor(n_states=3, degree=(2, 3),
@@ -219,8 +220,11 @@ def _fit_and_score(factory, seed, data, records, scale):
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         # A reproduction runs fixed settings: that a fit stopped at max_iter
-        # while still improving is a fact for the table, not advice.
+        # while still improving is a fact for the table, not advice, and so is
+        # what the data say about the settings (the paper's PNLSS without its
+        # initial state, whose start transient the cost partly sees).
         warnings.simplefilter("always", ConvergenceWarning)
+        warnings.simplefilter("ignore", DataWarning)
         model.fit(data["X_est"], data["y_est"])
     fit_time = time.perf_counter() - start
     for warning in caught:
