@@ -194,8 +194,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         starting value (see the user guide). Without ``estimate_x0`` and
         ``period``, the cost also skips the settling time of the linear
         model's slowest mode that shows in its output (to 1 %, at most a tenth
-        of each sequence, with a DataWarning when it is over twice as long): a record
-        rarely starts at rest.
+        of each sequence, with a DataWarning when it is over twice as long): a
+        record rarely starts at rest.
     verbose : int, default=0
         Print the progress of the optimisation when positive: every iteration
         of every start (where the start runs, a joblib worker with
