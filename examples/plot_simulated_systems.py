@@ -74,25 +74,26 @@ for name, (make, n_states, tests) in systems.items():
         warnings.simplefilter("always", ConvergenceWarning)
         warnings.simplefilter("always", DataWarning)
         nllfr.fit(data.X_est, data.y_est)
-    errors = [nrmse(data.y_test[skip:], model.predict(
-        data.X_test, x0=model.estimate_initial_state(data.X_test[:skip], data.y_test[:skip])
-    )[skip:]) for model in (bla, nllfr)]
+    simulations = {label: model.predict(data.X_test, x0=model.estimate_initial_state(
+        data.X_test[:skip], data.y_test[:skip])) for label, model in (("BLA", bla),
+                                                                      ("NL-LFR", nllfr))}
+    errors = [nrmse(data.y_test[skip:], y_sim[skip:]) for y_sim in simulations.values()]
     notes = {ConvergenceWarning: "at max_iter", DataWarning: "start transient in the cost"}
     note = "".join(f"  {text}" for category, text in notes.items()
                    if any(issubclass(w.category, category) for w in caught))
     print(f"{name:20s}{tests:28s}{n_states:6d}{errors[0]:9.3f}{errors[1]:9.3f}{note}")
-    fitted[name] = data, bla, nllfr
+    fitted[name] = data, simulations
 print(f"({time.perf_counter() - start:.0f} s in all)")
 
 # %%
 # The closed-loop drive
 # ---------------------
-# The test record of the drive simulated by both models; at its end the
-# reference carries the position beyond the estimation positions.
-data, bla, nllfr = fitted["closed-loop drive"]
+# The test record of the drive simulated by both models, each from the state
+# that fits the first ``init_window`` samples, as scored in the table; at its
+# end the reference carries the position beyond the estimation positions.
+data, simulations = fitted["closed-loop drive"]
 fig = plot_simulation(1e3 * data.y_test,
-                      {"BLA": 1e3 * bla.predict(data.X_test),
-                       "NL-LFR": 1e3 * nllfr.predict(data.X_test)},
+                      {label: 1e3 * y_sim for label, y_sim in simulations.items()},
                       sampling_time=data.sampling_time, unit="mm")
 fig.suptitle("Closed-loop drive, test record")
 plt.show()
