@@ -10,6 +10,7 @@ output unchanged).
 """
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 from scipy.linalg import LinAlgError, qr, svd
@@ -18,21 +19,20 @@ from threadpoolctl import ThreadpoolController
 
 from ..exceptions import warn_at_caller
 
-_THREADPOOLS = []
+@cache
+def _threadpools():
+    """The loaded thread pools, found once, at the first call (after NumPy's
+    and SciPy's BLAS have loaded): finding them scans the loaded libraries,
+    about 2 ms, more than a small search takes (an initial state per sequence
+    of a long record)."""
+    return ThreadpoolController()
 
 
 def one_blas_thread():
-    """A context in which BLAS runs on one thread.
-
-    The factorisations of the library are small, and threads only add
-    synchronisation (tenfold on two cores, see DESIGN.md §2). The controller
-    is made once, at the first call (after NumPy's and SciPy's BLAS have
-    loaded): making one scans the loaded libraries, about 2 ms, more than a
-    small search takes (an initial state per sequence of a long record).
-    """
-    if not _THREADPOOLS:
-        _THREADPOOLS.append(ThreadpoolController())
-    return _THREADPOOLS[0].limit(limits=1, user_api="blas")
+    """A context in which BLAS runs on one thread: the factorisations of the
+    library are small, and threads only add synchronisation (tenfold on two
+    cores, see DESIGN.md §2)."""
+    return _threadpools().limit(limits=1, user_api="blas")
 
 
 # Damping is raised by this factor after a rejected step and lowered by

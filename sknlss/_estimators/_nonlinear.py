@@ -378,21 +378,21 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             return self.n_transient
         limit = int(_MAX_TRANSIENT_SHARE * np.max(np.diff(starts)))
         settled = settling_time + int(np.max(self.input_delay_, initial=0))
+        fit_transient = max(self.n_transient, min(settled, limit))
         # A mode that does not decay never settles: it belongs to the linear
         # part of a start (the decoupled model's PNLSS part may grow), not to
         # the data, and the tenth is left out.
         if np.isfinite(settled):
-            self._warn_if_transient_left(settled, starts)
-        return max(self.n_transient, min(settled, limit))
+            self._warn_if_transient_left(settled, starts, fit_transient)
+        return fit_transient
 
-    def _warn_if_transient_left(self, settled, starts):
+    def _warn_if_transient_left(self, settled, starts, fit_transient):
         """Warn when, at the end of the samples left out of the cost at the
         start of the shortest sequence, more than ``_TRANSIENT_LEFT`` of the
         response to its unknown initial state is left (the slowest mode
         decays to ``_SETTLED`` in ``settled`` samples)."""
         lengths = np.diff(starts)
-        skipped = max(self.n_transient,
-                      min(settled, int(_MAX_TRANSIENT_SHARE * np.min(lengths))))
+        skipped = int(np.min(_transients_per_sequence(self.n_transient, fit_transient, starts)))
         if skipped >= settled or _SETTLED ** (skipped / settled) <= _TRANSIENT_LEFT:
             return
         which = "every sequence" if np.all(lengths == lengths[0]) else "the shortest sequence"
@@ -406,11 +406,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
             "sequences are long enough.", DataWarning)
 
     def _sequence_transients(self, starts):
-        """Samples left out of the cost at the start of each sequence:
-        ``fit_transient_``, at most a tenth of each sequence where it exceeds
-        ``n_transient`` (which only the settling time makes it do)."""
-        limits = (_MAX_TRANSIENT_SHARE * np.diff(starts)).astype(int)
-        return np.maximum(self.n_transient, np.minimum(self.fit_transient_, limits))
+        """Samples left out of the cost at the start of each sequence (see
+        :func:`_transients_per_sequence`)."""
+        return _transients_per_sequence(self.n_transient, self.fit_transient_, starts)
 
     def _structure(self):
         """The structure parameters and their values, for messages."""
@@ -821,6 +819,14 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
 #: inputs (see ``RangedTerms``; "bounded" is for polynomial terms only).
 _CONTINUATIONS = {"linear": {"reach": 1.0}, "continue": {"reach": np.inf},
                   "bounded": {"reach": 2.0, "held": True}}
+
+
+def _transients_per_sequence(n_transient, fit_transient, starts):
+    """Samples left out of the cost at the start of each sequence:
+    ``fit_transient``, at most a tenth of each sequence where it exceeds
+    ``n_transient`` (which only the settling time makes it do)."""
+    limits = (_MAX_TRANSIENT_SHARE * np.diff(starts)).astype(int)
+    return np.maximum(n_transient, np.minimum(fit_transient, limits))
 
 
 def ranged_prediction_terms(model, theta, U, starts, extrapolation):

@@ -374,8 +374,7 @@ def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
         weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
     unique, group = np.unique(freqs, return_inverse=True)
     if unique.size < freqs.size:
-        if not estimated.all():
-            weight = weight * estimated
+        weight = weight * estimated
         wsum = np.zeros((unique.size,) + G.shape[1:])
         np.add.at(wsum, group, weight)
         Gsum = np.zeros((unique.size,) + G.shape[1:], dtype=complex)

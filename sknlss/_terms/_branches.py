@@ -91,9 +91,12 @@ def evaluate_basis(code, degrees, z):
 # spec = [rank, n_functions, basis code, shift (0 or 1), degrees ...]
 # work = [lower (r), upper (r), g (r), g' (r), phi (r x n_functions),
 #         phi' (r x n_functions)], and with shift [g'(b) (r), the basis at the
-#         bias (2 x n_functions)]; the range [lower, upper] of each branch
-#         input, beyond which its function continues linearly, is set by
-#         work_init.
+#         biases (r x n_functions), scratch (n_functions), ready (1)]; the range
+#         [lower, upper] of each branch input, beyond which its function
+#         continues linearly, is set by work_init. The anchors (the basis at the
+#         biases, and g'(b)) depend on the parameters only, which are fixed
+#         during a kernel call: the first evaluation of the call computes them
+#         and sets ready (work starts as a copy of work_init in every call).
 _HEADER = 4
 
 
@@ -110,15 +113,19 @@ def _layout(spec, n_vars):
 
 @njit(cache=True, inline="always")
 def _work_layout(rank, n_fun):
-    """Offsets in ``work`` of g, g', phi, phi', g'(b) and the basis at b."""
+    """Offsets in ``work`` of g, g', phi, phi', g'(b), the basis at b, the
+    scratch and the ready flag."""
     o_phi = 4 * rank
     o_dphi = o_phi + rank * n_fun
     o_anchor_slope = o_dphi + rank * n_fun
-    return 2 * rank, 3 * rank, o_phi, o_dphi, o_anchor_slope, o_anchor_slope + rank
+    o_anchor = o_anchor_slope + rank
+    o_scratch = o_anchor + rank * n_fun
+    return (2 * rank, 3 * rank, o_phi, o_dphi, o_anchor_slope, o_anchor, o_scratch,
+            o_scratch + n_fun)
 
 
 def _work_size(rank, n_fun, shifted):
-    return 4 * rank + 2 * rank * n_fun + (rank + 2 * n_fun if shifted else 0)
+    return 4 * rank + 2 * rank * n_fun + (rank * (n_fun + 1) + n_fun + 1 if shifted else 0)
 
 
 @njit(cache=True, inline="always")
@@ -138,7 +145,17 @@ def _evaluate(theta, spec, s, n, h, work):
     rank, n_fun, shifted, o_bias, o_coef, o_w = _layout(spec, n_vars)
     code = spec[2]
     degrees = spec[_HEADER : _HEADER + n_fun]
-    o_g, o_dg, o_phi, o_dphi, o_anchor_slope, o_anchor = _work_layout(rank, n_fun)
+    o_g, o_dg, o_phi, o_dphi, o_anchor_slope, o_anchor, o_scratch, o_ready = _work_layout(
+        rank, n_fun)
+    if shifted and work[o_ready] == 0.0:
+        for l in range(rank):
+            _continued_basis(code, degrees, theta[o_bias + l], work[l], work[rank + l], work,
+                             o_anchor + l * n_fun, o_scratch)
+            anchor_slope = 0.0
+            for k in range(n_fun):
+                anchor_slope += theta[o_coef + l * n_fun + k] * work[o_scratch + k]
+            work[o_anchor_slope + l] = anchor_slope
+        work[o_ready] = 1.0
     for l in range(rank):
         z = theta[o_bias + l] if shifted else 0.0
         for j in range(n_vars):
@@ -146,13 +163,8 @@ def _evaluate(theta, spec, s, n, h, work):
         o_values, o_slopes = o_phi + l * n_fun, o_dphi + l * n_fun
         _continued_basis(code, degrees, z, work[l], work[rank + l], work, o_values, o_slopes)
         if shifted:
-            _continued_basis(code, degrees, theta[o_bias + l], work[l], work[rank + l], work,
-                             o_anchor, o_anchor + n_fun)
-            anchor_slope = 0.0
             for k in range(n_fun):
-                work[o_values + k] -= work[o_anchor + k]
-                anchor_slope += theta[o_coef + l * n_fun + k] * work[o_anchor + n_fun + k]
-            work[o_anchor_slope + l] = anchor_slope
+                work[o_values + k] -= work[o_anchor + l * n_fun + k]
         g = 0.0
         dg = 0.0
         for k in range(n_fun):
@@ -185,7 +197,7 @@ def _add_rows(theta, spec, s, work, first_row, out, out_offset):
     """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V,
     b, c and W added to ``out`` from column ``out_offset``."""
     rank, n_fun, shifted, o_bias, o_coef, o_w = _layout(spec, s.shape[0])
-    o_g, o_dg, o_phi, _, o_anchor_slope, _ = _work_layout(rank, n_fun)
+    o_g, o_dg, o_phi, _, o_anchor_slope, _, _, _ = _work_layout(rank, n_fun)
     for r in range(out.shape[0]):
         i = first_row + r
         row = out[r]
@@ -254,21 +266,15 @@ class BranchTerms(RangedTerms):
         # The range of the branch inputs heads the work.
         self._set_range(input_range, reach, rank)
 
-    def branch_inputs(self, values, S):
-        """The branch inputs ``V^T s + b`` at the points ``S = [x; u]``, with
-        ``V`` (and ``b``) from the parameter blocks ``values``."""
-        Z = S @ values["V"]
-        return Z + values["bias"] if "bias" in values else Z
-
     def with_input_range(self, values, S, reach=1.0):
         """The same terms with the range that the branch inputs take at the
         points ``S = [x; u]`` (parameter blocks ``values``), held out to
         ``reach`` times its half-width. The range of a shifted branch also
         holds its bias, the input at ``s = 0`` where it is anchored, so that
         the anchor is the value the fit used."""
-        Z = self.branch_inputs(values, S)
+        Z = S @ values["V"]
         if "bias" in values:
-            Z = np.vstack([Z, values["bias"]])
+            Z = np.vstack([Z + values["bias"], values["bias"]])
         return BranchTerms(*self.dimensions, self.rank, self.basis,
                            np.vstack([Z.min(axis=0), Z.max(axis=0)]), reach)
 
