@@ -114,9 +114,9 @@ class Benchmark:
     records : callable
         ``records(data)`` returns ``{name: (X, y, n_skip)}``: the test records
         and the samples at their start that set the state and are not scored.
-    unit : str
+    unit : str, default="V"
         Unit of the reported errors.
-    scale : float
+    scale : float, default=1.0
         Factor from the data's unit to ``unit``.
     """
 
@@ -129,7 +129,8 @@ class Benchmark:
     scale: float = 1.0
 
 
-#: The benchmarks of :func:`reproduce`, by name.
+#: The benchmarks of :func:`reproduce`, by name (``"cascaded_tanks"``,
+#: ``"silverbox"``): dict of :class:`Benchmark`.
 BENCHMARKS = {
     "cascaded_tanks": Benchmark("Cascaded Tanks", fetch_cascaded_tanks,
                                 lambda: make_cascaded_tanks(random_state=0), _tanks_models,

@@ -117,6 +117,8 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         Number of inputs.
     feature_names_in_ : ndarray of shape (n_features_in_,)
         Names of the inputs, when ``X`` has column names of strings.
+    n_params_ : int
+        Number of free parameters of the selected model.
 
     See Also
     --------

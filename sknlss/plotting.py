@@ -243,8 +243,8 @@ def plot_frf(bla, *, sampling_time=None, output_index=0, input_index=0, ax=None)
         hint = (" A nonlinear model's linear start is its bla_: plot_frf(model.bla_)."
                 if hasattr(bla, "bla_") else "")
         raise ValueError(
-            "plot_frf needs a fitted BLAEstimator; the object has no attribute(s) "
-            f"{', '.join(missing)}.{hint}"
+            "plot_frf needs a fitted BLAEstimator as bla; the object passed "
+            f"({type(bla).__name__}) has no attribute(s) {', '.join(missing)}.{hint}"
         )
     frequencies = np.asarray(bla.frequencies_, dtype=float)
     if frequencies.ndim != 1 or frequencies.size == 0 or not np.all(np.isfinite(frequencies)):

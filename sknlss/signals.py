@@ -48,7 +48,13 @@ def _select_lines(n_samples_per_period, lines, band, group_size, rng):
                 "An explicit set of lines must be a non-empty 1-D integer array, "
                 f"got {lines!r}."
             )
-        selected = np.unique(selected.astype(np.int64))
+        selected = selected.astype(np.int64)
+        if np.any(np.diff(selected) <= 0):
+            # Amplitudes given as an array follow the lines in their order, so a
+            # reordered or repeated line would silently move an amplitude.
+            raise ValueError(
+                f"An explicit set of lines must be strictly increasing, got {lines!r}."
+            )
         if selected[0] < 1 or 2 * selected[-1] >= n_samples_per_period:
             raise ValueError(
                 f"Excited lines must lie in [1, {(n_samples_per_period - 1) // 2}] "
@@ -141,8 +147,8 @@ def multisine(n_samples_per_period, *, n_periods=1, n_realizations=1, lines="odd
         odd lines; ``"special_odd"``: the lines ``8m+1`` and ``8m+3``;
         ``"random_odd"``: the odd lines, less one line chosen at random in each
         consecutive group of ``group_size`` odd lines (the detection lines of
-        odd nonlinear distortion). An explicit integer array is used as is
-        and ``band`` is then ignored. DC and the Nyquist line are never
+        odd nonlinear distortion). An explicit, strictly increasing integer
+        array is used as is and ``band`` is then ignored. DC and the Nyquist line are never
         excited.
     band : tuple of float, default=(0.0, 0.45)
         ``(f_min, f_max)``, the excited frequency band as fractions of the

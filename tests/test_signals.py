@@ -101,6 +101,8 @@ def test_explicit_lines_and_amplitudes():
         ({"lines": [0, 3]}, "Excited lines must lie"),
         ({"lines": [3, 32]}, "Excited lines must lie"),
         ({"lines": [1.5]}, "integer array"),
+        ({"lines": [5, 3]}, "strictly increasing"),
+        ({"lines": [3, 3, 5]}, "strictly increasing"),
         ({"band": (0.3, 0.2)}, "band must satisfy"),
         ({"band": 0.2}, "'band' parameter"),
         ({"band": (0.0, 0.001)}, "No line"),

@@ -586,10 +586,15 @@ class BLAEstimator(_BaseStateSpace):
         ``estimate_x0``; ``n`` per sequence for several).
     n_iter_ : int
         Levenberg-Marquardt iterations performed.
-    loss_history_ : ndarray of shape (n_iter_ + 1,)
-        Weighted FRF cost per iteration (mean squared weighted residual).
+    loss_history_ : ndarray of shape (n_iter_ + 1,) or None
+        Weighted FRF cost per iteration (mean squared weighted residual);
+        None with ``max_iter=0``, which keeps the subspace model unrefined.
     n_features_in_ : int
         Number of inputs.
+    n_outputs_ : int
+        Number of outputs.
+    input_delay_ : ndarray of shape (n_inputs,), dtype int
+        Dead time of each input in samples (``input_delay`` per input column).
     u_offset_, u_scale_, y_offset_, y_scale_ : ndarray
         Offsets and scales of the normalisation.
 

@@ -172,7 +172,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         iterate. ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275
         and 0.325 in turn and ranks them on the end they all held out (no
         hold-out with ``period``, periodic records being fitted in whole
-        periods, nor for sequences shorter than 100 samples).
+        periods, nor when every sequence is shorter than 100 samples).
     refit : bool, default=False
         After the search, refine the kept start on all the rows, the held-out
         ends included, for up to ``max_iter`` iterations (no effect without
@@ -319,6 +319,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         a tenth of its length))``.
     n_features_in_ : int
         Number of inputs seen during ``fit``.
+    n_outputs_ : int
+        Number of outputs.
+    input_delay_ : ndarray of shape (n_inputs,), dtype int
+        Dead time of each input in samples (``input_delay`` per input column).
     u_offset_, u_scale_ : ndarray of shape (n_inputs,)
         Normalisation of the inputs.
     y_offset_, y_scale_ : ndarray of shape (n_outputs,)

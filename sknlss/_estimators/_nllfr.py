@@ -408,8 +408,9 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         tail continues the simulation of the fitted part). 0 keeps the last
         iterate. ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275
         and 0.325 in turn and ranks them on the end they all held out (no
-        hold-out with ``period``, periodic records being fitted in whole
-        periods, nor for sequences shorter than 100 samples).
+        hold-out with ``period``, set here or in the ``bla`` template,
+        periodic records being fitted in whole periods, nor when every
+        sequence is shorter than 100 samples).
     refit : bool, default=False
         After the search, refine the kept start on all the rows, the held-out
         ends included, for up to ``max_iter`` iterations (no effect without
@@ -558,6 +559,10 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
         a tenth of its length))``.
     n_features_in_ : int
         Number of inputs.
+    n_outputs_ : int
+        Number of outputs.
+    input_delay_ : ndarray of shape (n_inputs,), dtype int
+        Dead time of each input in samples (``input_delay`` per input column).
     u_offset_, u_scale_, y_offset_, y_scale_ : ndarray
         Normalisation of the signals.
 

@@ -149,7 +149,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         paper's lambda), in normalised units. Smaller values let the states
         follow the measured output more closely, so that the networks see
         more of the nonlinearity. ``"auto"`` follows the paper: it tries
-        ``ALPHA_GRID`` and keeps the value whose *initialised* model simulates
+        the six values 0.01, 0.1, 1, 10, 100 and 1000 and keeps the value whose *initialised* model simulates
         best on the validation rows (on the fitted rows when
         ``validation_fraction=0``). That criterion favours large values, whose
         initial model is close to the linear one; on the Cascaded Tanks data
@@ -208,8 +208,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         the iteration and the start. ``0`` selects on the training cost.
         ``"auto"`` gives the starts the shares 0.25, 0.3, 0.35, 0.275 and
         0.325 in turn and ranks them on the end they all held out (no
-        hold-out with ``period``, periodic records being fitted in whole
-        periods, nor for sequences shorter than 100 samples).
+        hold-out with ``period``, set here or in the ``bla`` template,
+        periodic records being fitted in whole periods, nor when every
+        sequence is shorter than 100 samples).
     refit : bool, default=True
         After the search, refine the kept start on all the rows, the held-out
         ends included, for up to ``max_iter`` iterations (no effect without
@@ -299,8 +300,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         ``x0_``.
     alpha_ : float
         State-estimation weight used.
-    alpha_losses_ : ndarray of shape (len(ALPHA_GRID),)
-        Selection losses of the candidates, when ``alpha="auto"``.
+    alpha_losses_ : ndarray of shape (6,)
+        Selection losses of the six candidates of ``alpha="auto"``, in
+        increasing order of ``alpha``.
     states_init_ : ndarray of shape (n_rows_before_holdout, n_states)
         States estimated from the linear model on each sequence up to its
         held-out end (the cost transient included), from which the networks
@@ -361,6 +363,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         user's units.
     n_features_in_ : int
         Number of inputs.
+    n_outputs_ : int
+        Number of outputs.
+    input_delay_ : ndarray of shape (n_inputs,), dtype int
+        Dead time of each input in samples (``input_delay`` per input column).
     u_offset_, u_scale_, y_offset_, y_scale_ : ndarray
         Normalisation of the signals.
 

@@ -1,0 +1,1 @@
+"""Linear systems: nonparametric FRFs, state-space realization and state estimation."""

@@ -1,0 +1,1 @@
+"""The nonlinear terms: polynomials, networks, branch bases and the CPD decoupling."""
