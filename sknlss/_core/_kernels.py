@@ -70,6 +70,7 @@ outputs and states are NaN from there to its end.
 
 import numpy as np
 from numba import njit, types
+from numba.core.typing.typeof import typeof_impl
 from numba.experimental.function_type import _get_wrapper_address
 
 #: Largest absolute normalised state or output value a simulation may reach
@@ -107,12 +108,20 @@ class _FunctionPointer(types.WrapperAddressProtocol):
     def __init__(self, function, signature):
         self._address = _get_wrapper_address(function, signature)
         self._signature = signature
+        self.numba_type = types.FunctionType(signature)
 
     def __wrapper_address__(self):
         return self._address
 
     def signature(self):
         return self._signature
+
+
+@typeof_impl.register(_FunctionPointer)
+def _typeof_function_pointer(value, context):
+    # numba's generic rule for the wrapper-address protocol builds this same
+    # type anew at every kernel call (tens of microseconds per pointer).
+    return value.numba_type
 
 
 _POINTERS = {}

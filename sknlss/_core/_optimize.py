@@ -94,15 +94,23 @@ def _scaled_step_factors(J, r):
 
     Returns
     -------
-    s : ndarray of shape (k,)
-        Singular values, decreasing.
-    Vt : ndarray of shape (k, n_params)
-    col_scale : ndarray of shape (n_params,)
-    projected : ndarray of shape (k,)
-        ``U.T @ r``.
+    factors : tuple or None
+        None when ``J`` holds a value that is not finite, else
+
+        s : ndarray of shape (k,)
+            Singular values, decreasing.
+        Vt : ndarray of shape (k, n_params)
+        col_scale : ndarray of shape (n_params,)
+        projected : ndarray of shape (k,)
+            ``U.T @ r``.
     """
     p = J.shape[1]
-    col_scale = np.sqrt(np.einsum("ij,ij->j", J, J))
+    squares = np.einsum("ij,ij->j", J, J)
+    # A value of J that is not finite makes its column's sum so; only then is
+    # J itself scanned (the sums of a finite J can overflow).
+    if not np.all(np.isfinite(squares)) and not np.all(np.isfinite(J)):
+        return None
+    col_scale = np.sqrt(squares)
     col_scale[col_scale == 0.0] = 1.0
     # Rows that are zero in J and r (e.g. the imaginary parts of the DFT's
     # real bins) change neither factor; the QR's cost grows with the rows.
@@ -237,13 +245,14 @@ def levenberg_marquardt(
     n_iter = 0
     with one_blas_thread():
         while n_iter < max_iter:
-            if not np.all(np.isfinite(J)):
+            factors = _scaled_step_factors(J, r)
+            if factors is None:
                 # The sensitivities of the current iterate overflowed although
                 # its outputs are finite: no step can be computed from them
                 # (LAPACK would reject the NaN), so the search ends here.
                 converged = True
                 break
-            s, Vt, col_scale, projected = _scaled_step_factors(J, r)
+            s, Vt, col_scale, projected = factors
             if s[0] == 0.0:
                 # The residual does not depend on the parameters here: no
                 # step can lower the cost.

@@ -321,7 +321,7 @@ class SimulationErrorProblem:
 
     def _fitted_points(self, X):
         """``[x; u]`` at the cost rows, from the simulated states X."""
-        return np.hstack([X, self.U])[self.fit_rows]
+        return np.hstack([X[self.fit_rows], self.U[self.fit_rows]])
 
     def set_decay_scale(self, theta):
         """Fix the scale of the weight decay from the trajectory of ``theta``

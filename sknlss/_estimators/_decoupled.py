@@ -560,7 +560,14 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
 
     def _decoupling(self, context, seed):
         """The PNLSS polynomials decoupled with one random draw of the sampling
-        points and CPD initialisations: ``V, W, c`` and the decoupling error."""
+        points and CPD initialisations: ``V, W, c`` and the decoupling error,
+        kept by seed (the kept start's error is recorded after the search)."""
+        found = context.setdefault("decouplings", {})
+        if seed not in found:
+            found[seed] = self._decouple(context, seed)
+        return found[seed]
+
+    def _decouple(self, context, seed):
         rng = check_random_state(seed)
         model = context["model"]
         n, n_u, n_y = model.n_states, model.n_inputs, model.n_outputs
