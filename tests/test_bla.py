@@ -504,6 +504,21 @@ def test_collinear_inputs_are_refused(period):
                                                     sequence_id=np.repeat(np.arange(4), 256))
 
 
+def test_independent_periodic_inputs_without_period_are_separated():
+    # Over three periods every third bin holds input: a window of neighbouring
+    # bins cannot tell the two inputs apart, a window of neighbouring excited
+    # bins can (this record was refused as collinear).
+    u, _ = multisine(256, n_periods=3, n_realizations=2, lines="full", band=(0.0, 0.4),
+                     random_state=0)
+    X = u.T
+    y = np.column_stack([lfilter([0.0, 1.0], [1.0, -0.5], X[:, 0]) + 0.3 * X[:, 1],
+                         lfilter([0.0, 0.5], [1.0, -0.3], X[:, 1]) + 0.2 * X[:, 0]])
+    y += 1e-3 * np.random.default_rng(0).standard_normal(y.shape)
+    bla = BLAEstimator(n_states=2).fit(X, y)
+    np.testing.assert_allclose(np.sort(bla.poles_.real), [0.3, 0.5], atol=0.01)
+    assert bla.score(X, y) > 0.999
+
+
 @pytest.mark.parametrize("n_periods", [1, 2, 3])
 def test_lpm_on_whole_periods_given_without_period(n_periods):
     # Between the lines of a periodic input the record's DFT holds no input:

@@ -285,37 +285,57 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     power)."""
     n, n_u = U.shape
     n_bins = (n - 1) // 2  # positive bins below Nyquist
-    width, order = lpm_window(n_u, order, n_bins, bandwidth)
     Uf = np.fft.fft(U, axis=0)[1 : n_bins + 1] / np.sqrt(n)
     Yf = np.fft.fft(Y, axis=0)[1 : n_bins + 1] / np.sqrt(n)
-    bins = np.arange(1, n_bins + 1)
-    centres = np.flatnonzero(_band_mask(bins, n, max_frequency))
+    frequencies = np.arange(1, n_bins + 1) / n
+    in_band = _band_mask(np.arange(1, n_bins + 1), n, max_frequency)
+    bin_power = np.sum(np.abs(Uf) ** 2, axis=1)
+    excited = bin_power > EXCITATION_THRESHOLD * bin_power.max(initial=0.0)
+    width, degree = lpm_window(n_u, order, n_bins, bandwidth)
+    record, collinear = _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, degree)
+    if collinear and width <= np.count_nonzero(excited) < n_bins:
+        # Independent periodic inputs over several periods excite every k-th
+        # bin only, too few in a window of neighbouring bins to tell the
+        # inputs apart. A window of neighbouring excited bins does: the FRFs
+        # are as smooth across the excited lines as across the bins.
+        record, collinear = _lpm_bins(Uf[excited], Yf[excited], frequencies[excited],
+                                      in_band[excited], excited[excited], width, degree)
+    return record, collinear
+
+
+def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order):
+    """:func:`_lpm_record` on the DFT bins ``Uf``, ``Yf`` (at ``frequencies``),
+    with windows of ``width`` neighbouring bins centred on those ``in_band``;
+    the bins not ``excited`` give no estimate."""
+    n_u = Uf.shape[1]
+    centres = np.flatnonzero(in_band)
     if centres.size == 0:
         # A window with more bins than unknowns has a variance estimate, as
         # the bins out of the band would have had.
-        empty = np.empty((0, Y.shape[1], n_u), dtype=complex)
-        variance = np.empty(empty.shape) if width > _lpm_unknowns(n_u, order) else None
-        return (np.empty(0), empty, variance, np.empty((0, n_u))), False
+        empty = np.empty((0, Yf.shape[1], n_u), dtype=complex)
+        noise = np.empty((0, Yf.shape[1])) if width > _lpm_unknowns(n_u, order) else None
+        return (np.empty(0), empty, noise, np.empty((0, n_u)), np.empty((0, n_u))), False
     # The windows' regressors, factors and residuals take about 2 kB per
     # bin; fitted a block of bins at a time, the memory stays that of the
     # record's DFT however long the record.
     fits = [_lpm_windows(Uf, Yf, block, width, order)
             for block in np.array_split(centres, -(-centres.size // _LPM_BLOCK))]
     G, noise_var, gain, dof, deficient, window_power = map(np.concatenate, zip(*fits))
-    var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
+    if not np.all(dof > 0):
+        noise_var = None
     # A bin without input power of its own (an unexcited line of a periodic
     # input, whose window still holds excited ones) has no FRF to estimate:
     # its estimate would be extrapolated from the neighbours, with a variance
     # that does not show it. It counts as not excited.
-    bin_power = np.sum(np.abs(Uf) ** 2, axis=1)
-    window_power[bin_power[centres] <= EXCITATION_THRESHOLD * bin_power.max(initial=0.0)] = 0.0
+    window_power[~excited[centres]] = 0.0
     if n_u > 1:
         # Where the inputs are collinear over a window, the FRFs of the
         # inputs cannot be told apart: the bin counts as not excited. (A
         # window narrower than its unknowns, on a very short record, is
         # underdetermined whatever the inputs.)
         window_power[deficient] = 0.0
-    return (bins[centres] / n, G, var, window_power), n_u > 1 and not np.any(window_power)
+    return ((frequencies[centres], G, noise_var, gain, window_power),
+            n_u > 1 and not np.any(window_power))
 
 
 def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
@@ -327,8 +347,10 @@ def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_fre
     Returns
     -------
     records : list of tuple
-        Per sequence: frequencies, FRF, variance (or None) and the power of
-        each input in each bin's window.
+        Per sequence: frequencies, FRF, the noise variance of each output
+        (None without degrees of freedom), the variance gain of each input's
+        FRF (its variance is the product of both) and the power of each input
+        in each bin's window.
     """
     records, collinear = zip(*(
         _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
@@ -353,26 +375,37 @@ def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
     With several inputs, the entries of an input whose own window power there
     is below ``power_threshold`` times its largest are not estimated: where an
     input has no power of its own, the regression's pseudo-inverse sets its
-    FRF to zero, with a variance that does not show it."""
+    FRF to zero, with a variance that does not show it.
+
+    Where records share a frequency, their noise variances there are pooled:
+    weighted by each record's own estimate, of three or four degrees of
+    freedom, the combination would favour the records whose noise happened to
+    come out low, and its variance would be underestimated (by a quarter with
+    two records, a half with eight)."""
     parts = []
-    for freqs, G, var, power in records:
+    for freqs, G, noise, gain, power in records:
         total = np.sum(power, axis=1)
         keep = total > power_threshold * total.max(initial=0.0)
         own = power[keep] > power_threshold * power.max(axis=0, initial=0.0)
-        parts.append((freqs[keep], G[keep], None if var is None else var[keep],
+        parts.append((freqs[keep], G[keep], None if noise is None else noise[keep], gain[keep],
                       np.broadcast_to(own[:, None, :], G[keep].shape)))
     freqs = np.concatenate([p[0] for p in parts])
     if freqs.size == 0:
         raise ValueError("The input X has no power on any usable frequency bin.")
     G = np.concatenate([p[1] for p in parts])
-    estimated = np.concatenate([p[3] for p in parts])
+    estimated = np.concatenate([p[4] for p in parts])
+    unique, group = np.unique(freqs, return_inverse=True)
     if any(p[2] is None for p in parts):
         var = None
         weight = np.ones(G.shape)
     else:
-        var = np.concatenate([p[2] for p in parts])
+        noise = np.concatenate([p[2] for p in parts])
+        if unique.size < freqs.size:
+            pooled = np.zeros((unique.size, noise.shape[1]))
+            np.add.at(pooled, group, noise)
+            noise = (pooled / np.bincount(group)[:, None])[group]
+        var = noise[:, :, None] * np.concatenate([p[3] for p in parts])[:, None, :]
         weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
-    unique, group = np.unique(freqs, return_inverse=True)
     if unique.size < freqs.size:
         weight = weight * estimated
         wsum = np.zeros((unique.size,) + G.shape[1:])

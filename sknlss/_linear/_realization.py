@@ -182,8 +182,12 @@ def pole_radius_limit(poles, frequencies):
     the half-power band of every pole reaches the data. For a real pole near
     ``z = 1`` this bounds its time constant by ``1 / (2 pi f_min)`` samples,
     ``f_min`` being the lowest measured frequency (the corner frequency of the
-    mode is not below it); poles within a densely measured band are only
-    kept off the unit circle.
+    mode is not below it). The limit costs accuracy where the data would
+    have determined the damping: with noise-free periodic data of period
+    256, a real pole at 0.99 is fitted at 0.976, and a resonance of radius
+    0.995 midway between two lines at 0.988, each with a largest FRF error
+    of 39 % of the FRF's peak. A mode slower than ``N / (2 pi)`` samples, or narrower
+    than half the line spacing, needs a longer period or record.
 
     Parameters
     ----------
