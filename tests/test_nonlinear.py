@@ -426,6 +426,7 @@ def test_the_cost_skips_the_settling_time_of_the_slowest_mode(radius, skipped):
     ((1000,), 250, True),  # 0.16 is left
     ((3000, 1000), 250, True),  # the shorter sequence leaves out 100
     ((3000, 3000), 250, False),
+    ((1000,), 5000, True),  # slower than the record: n_transient cannot take it
 ])
 def test_a_warning_when_the_cost_sees_much_of_the_start_transient(lengths, settled, warns):
     starts = np.concatenate([[0], np.cumsum(lengths)])
@@ -442,6 +443,7 @@ def test_a_warning_when_the_cost_sees_much_of_the_start_transient(lengths, settl
         assert f"settles (to 1 %) in {settled} samples" in messages[0]
         assert "leaves out only the first 100 of" in messages[0]
         assert "estimate_x0=True" in messages[0]
+        assert ("n_transient to at least" in messages[0]) == (settled < max(lengths))
 
 
 def _linear_model(A, B=None, C=None):

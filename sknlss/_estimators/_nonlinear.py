@@ -396,14 +396,20 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if skipped >= settled or _SETTLED ** (skipped / settled) <= _TRANSIENT_LEFT:
             return
         which = "every sequence" if np.all(lengths == lengths[0]) else "the shortest sequence"
+        if settled < np.max(lengths):
+            advice = f"Set estimate_x0=True, or n_transient to at least {settled}."
+        else:
+            advice = ("Set estimate_x0=True. A mode slower than the record may also be the "
+                      "linear start's alone, where the data leave its damping undetermined "
+                      "(near the edge of the excited band, for one): compare bla_.frf_ with "
+                      "bla_.frf_model_.")
         warn_at_caller(
             f"{type(self).__name__}: the slowest mode of the linear model that shows in the "
             f"output settles (to 1 %) in {settled} samples, and the cost leaves out only the "
             f"first {skipped} of {which} (without an estimated initial state, at most a "
             "tenth of a sequence): more than a tenth of the response to the unknown state at "
             "the start of the record enters the cost, and the fit bends the model to explain "
-            f"it. Set estimate_x0=True, or n_transient to at least {settled} if the "
-            "sequences are long enough.", DataWarning)
+            f"it. {advice}", DataWarning)
 
     def _sequence_transients(self, starts):
         """Samples left out of the cost at the start of each sequence (see
