@@ -241,17 +241,23 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
     return n_bins, 0
 
 
-def _lpm_windows(Uf, Yf, centres, width, order):
+def _lpm_windows(Uf, Yf, centres, width, order, bins=None):
     """LPM fits of the windows centred on the bins ``centres`` (0-based in
-    ``Uf`` and ``Yf``): FRF, noise variance of the outputs, the variance gain
-    of each FRF unknown, degrees of freedom, whether the regressors are rank
+    ``Uf`` and ``Yf``, whose DFT bin numbers are ``bins``, consecutive by
+    default): FRF, noise variance of the outputs, the variance gain of each
+    FRF unknown, degrees of freedom, whether the regressors are rank
     deficient, and the power of each input in each window."""
     n_bins, n_u = Uf.shape
     half = width // 2
     # window of bin k: the `width` bins closest to it that lie in 1..n_bins
     first = np.clip(centres - half, 0, n_bins - width)
     index = first[:, None] + np.arange(width)
-    offset = (index - centres[:, None]) / max(half, 1)
+    if bins is None:
+        offset = (index - centres[:, None]) / max(half, 1)
+    else:
+        # The polynomials are in frequency, whatever the spacing of the bins.
+        spacing = (bins[-1] - bins[0]) / max(bins.size - 1, 1)
+        offset = (bins[index] - bins[centres][:, None]) / (max(half, 1) * spacing)
     powers = offset[..., None] ** np.arange(order + 1)  # (bin, width, order+1)
     Uw = Uf[index]  # (bin, width, n_u)
     # regressors: [r^s u_i] for every s and i, then [r^s] for the transient
@@ -275,7 +281,11 @@ def _lpm_windows(Uf, Yf, centres, width, order):
     gain = np.sum(np.abs(np.conj(Vh[:, :, :n_u])) ** 2 * inv_s[..., None] ** 2, axis=1)
     G = coef[:, :n_u, :].transpose(0, 2, 1)  # (bin, n_y, n_u)
     window_power = np.sum(np.abs(Uw) ** 2, axis=1)
-    return G, noise_var, gain, dof, rank < min(K.shape[1:]), window_power
+    # An input without power in a window (inputs in different bands) leaves
+    # its columns empty: the others' FRFs are still separable there.
+    present = window_power > EXCITATION_THRESHOLD * window_power.max(axis=1, keepdims=True)
+    full_rank = np.minimum(width, (order + 1) * (np.sum(present, axis=1) + 1))
+    return G, noise_var, gain, dof, rank < full_rank, window_power
 
 
 def _lpm_record(U, Y, order, bandwidth, max_frequency):
@@ -292,37 +302,42 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     bin_power = np.sum(np.abs(Uf) ** 2, axis=1)
     excited = bin_power > EXCITATION_THRESHOLD * bin_power.max(initial=0.0)
     width, degree = lpm_window(n_u, order, n_bins, bandwidth)
-    record, collinear = _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, degree)
-    if collinear and width <= np.count_nonzero(excited) < n_bins:
+    record = _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, degree)
+    if n_u > 1 and width <= np.count_nonzero(excited) < n_bins:
         # Independent periodic inputs over several periods excite every k-th
-        # bin only, too few in a window of neighbouring bins to tell the
-        # inputs apart. A window of neighbouring excited bins does: the FRFs
-        # are as smooth across the excited lines as across the bins.
-        record, collinear = _lpm_bins(Uf[excited], Yf[excited], frequencies[excited],
-                                      in_band[excited], excited[excited], width, degree)
-    return record, collinear
+        # bin only, or a multisine some lines only: a window of neighbouring
+        # bins may hold too few excited ones to tell the inputs apart, where a
+        # window of neighbouring excited bins does (the FRFs are as smooth
+        # across the excited lines as across the bins). The windows that
+        # separate more of the inputs' entries are kept.
+        on_lines = _lpm_bins(Uf[excited], Yf[excited], frequencies[excited],
+                             in_band[excited], excited[excited], width, degree,
+                             bins=np.flatnonzero(excited))
+        if np.count_nonzero(on_lines[3]) > np.count_nonzero(record[3]):
+            record = on_lines
+    return record, n_u > 1 and not np.any(record[3])
 
 
-def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order):
-    """:func:`_lpm_record` on the DFT bins ``Uf``, ``Yf`` (at ``frequencies``),
+def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order, bins=None):
+    """The LPM record of :func:`_lpm_record` from the DFT bins ``Uf``, ``Yf``
+    (at ``frequencies``; DFT bin numbers ``bins``, consecutive by default),
     with windows of ``width`` neighbouring bins centred on those ``in_band``;
-    the bins not ``excited`` give no estimate."""
+    the bins not ``excited`` get no window power, hence no estimate."""
     n_u = Uf.shape[1]
     centres = np.flatnonzero(in_band)
     if centres.size == 0:
         # A window with more bins than unknowns has a variance estimate, as
         # the bins out of the band would have had.
         empty = np.empty((0, Yf.shape[1], n_u), dtype=complex)
-        noise = np.empty((0, Yf.shape[1])) if width > _lpm_unknowns(n_u, order) else None
-        return (np.empty(0), empty, noise, np.empty((0, n_u)), np.empty((0, n_u))), False
+        variance = np.empty(empty.shape) if width > _lpm_unknowns(n_u, order) else None
+        return np.empty(0), empty, variance, np.empty((0, n_u))
     # The windows' regressors, factors and residuals take about 2 kB per
     # bin; fitted a block of bins at a time, the memory stays that of the
     # record's DFT however long the record.
-    fits = [_lpm_windows(Uf, Yf, block, width, order)
+    fits = [_lpm_windows(Uf, Yf, block, width, order, bins)
             for block in np.array_split(centres, -(-centres.size // _LPM_BLOCK))]
     G, noise_var, gain, dof, deficient, window_power = map(np.concatenate, zip(*fits))
-    if not np.all(dof > 0):
-        noise_var = None
+    var = noise_var[:, :, None] * gain[:, None, :] if np.all(dof > 0) else None
     # A bin without input power of its own (an unexcited line of a periodic
     # input, whose window still holds excited ones) has no FRF to estimate:
     # its estimate would be extrapolated from the neighbours, with a variance
@@ -334,8 +349,7 @@ def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order):
         # window narrower than its unknowns, on a very short record, is
         # underdetermined whatever the inputs.)
         window_power[deficient] = 0.0
-    return ((frequencies[centres], G, noise_var, gain, window_power),
-            n_u > 1 and not np.any(window_power))
+    return frequencies[centres], G, var, window_power
 
 
 def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
@@ -347,10 +361,8 @@ def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_fre
     Returns
     -------
     records : list of tuple
-        Per sequence: frequencies, FRF, the noise variance of each output
-        (None without degrees of freedom), the variance gain of each input's
-        FRF (its variance is the product of both) and the power of each input
-        in each bin's window.
+        Per sequence: frequencies, FRF, variance (or None) and the power of
+        each input in each bin's window.
     """
     records, collinear = zip(*(
         _lpm_record(U[begin + n_transient : end], Y[begin + n_transient : end], order,
@@ -375,37 +387,26 @@ def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
     With several inputs, the entries of an input whose own window power there
     is below ``power_threshold`` times its largest are not estimated: where an
     input has no power of its own, the regression's pseudo-inverse sets its
-    FRF to zero, with a variance that does not show it.
-
-    Where records share a frequency, their noise variances there are pooled:
-    weighted by each record's own estimate, of three or four degrees of
-    freedom, the combination would favour the records whose noise happened to
-    come out low, and its variance would be underestimated (by a quarter with
-    two records, a half with eight)."""
+    FRF to zero, with a variance that does not show it."""
     parts = []
-    for freqs, G, noise, gain, power in records:
+    for freqs, G, var, power in records:
         total = np.sum(power, axis=1)
         keep = total > power_threshold * total.max(initial=0.0)
         own = power[keep] > power_threshold * power.max(axis=0, initial=0.0)
-        parts.append((freqs[keep], G[keep], None if noise is None else noise[keep], gain[keep],
+        parts.append((freqs[keep], G[keep], None if var is None else var[keep],
                       np.broadcast_to(own[:, None, :], G[keep].shape)))
     freqs = np.concatenate([p[0] for p in parts])
     if freqs.size == 0:
         raise ValueError("The input X has no power on any usable frequency bin.")
     G = np.concatenate([p[1] for p in parts])
-    estimated = np.concatenate([p[4] for p in parts])
-    unique, group = np.unique(freqs, return_inverse=True)
+    estimated = np.concatenate([p[3] for p in parts])
     if any(p[2] is None for p in parts):
         var = None
         weight = np.ones(G.shape)
     else:
-        noise = np.concatenate([p[2] for p in parts])
-        if unique.size < freqs.size:
-            pooled = np.zeros((unique.size, noise.shape[1]))
-            np.add.at(pooled, group, noise)
-            noise = (pooled / np.bincount(group)[:, None])[group]
-        var = noise[:, :, None] * np.concatenate([p[3] for p in parts])[:, None, :]
+        var = np.concatenate([p[2] for p in parts])
         weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
+    unique, group = np.unique(freqs, return_inverse=True)
     if unique.size < freqs.size:
         weight = weight * estimated
         wsum = np.zeros((unique.size,) + G.shape[1:])
