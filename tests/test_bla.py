@@ -626,3 +626,20 @@ def test_the_worse_than_the_mean_warning_names_input_delay():
     y = lfilter([0.1], [1.0, -1.6, 0.68], v + 0.3 * v**3)
     with pytest.warns(UserWarning, match="worse than the output's mean.*set input_delay"):
         BLAEstimator(n_states=2).fit(u[:, None], y)
+
+
+def test_total_weighting_from_two_realizations_uses_the_noise_variance():
+    # Two realizations give the total variance one degree of freedom per line;
+    # from three it weights the fit.
+    u, _ = multisine(128, n_periods=3, n_realizations=3, random_state=0)
+    x = lfilter([0.0, 1.0], [1.0, -0.6], u, axis=1)
+    y = x + 0.3 * x**3 + 0.01 * np.random.default_rng(0).standard_normal(x.shape)
+
+    def fit(n_realizations, weighting):
+        rows = slice(0, n_realizations * 384)
+        return BLAEstimator(n_states=1, period=128, weighting=weighting).fit(
+            u.reshape(-1, 1)[rows], y.reshape(-1)[rows],
+            sequence_id=np.repeat(np.arange(3), 384)[rows]).A_
+
+    np.testing.assert_array_equal(fit(2, "total"), fit(2, "noise"))
+    assert not np.array_equal(fit(3, "total"), fit(3, "noise"))

@@ -74,7 +74,12 @@ def _weights(estimate, weighting):
         var = estimate.total_variance if var is None else var
     elif weighting == "total":
         var = estimate.total_variance
-        var = estimate.noise_variance if var is None else var
+        if var is None or (estimate.total_variance_dof == 1
+                           and estimate.noise_variance is not None):
+            # From two groups of realizations the total variance has one
+            # degree of freedom: its inverse, of infinite mean, would weight
+            # the lines at random.
+            var = estimate.noise_variance
     else:
         var = None
     estimated = estimate.estimated
@@ -503,7 +508,10 @@ class BLAEstimator(_BaseStateSpace):
         Variance weighting the parametric fit: ``"total"`` (noise plus
         nonlinear distortions) or ``"noise"``; each falls back on the other
         when it cannot be estimated, and ``None`` (or no variance at all, e.g.
-        one realization of one period) gives a uniform weighting.
+        one realization of one period) gives a uniform weighting. From two
+        realizations (two groups of ``n_inputs``), whose total variance has
+        one degree of freedom per line, ``"total"`` weights by the noise
+        variance (see the user guide).
     max_iter : int, default=100
         Levenberg-Marquardt iterations refining the subspace estimate (0 keeps
         the subspace estimate).

@@ -63,6 +63,9 @@ class FRFEstimate:
         own near a frequency has no FRF there, though others do (several
         inputs of different bands); its entries are zero and not estimated.
         None: every entry.
+    total_variance_dof : int or None
+        Complex degrees of freedom of ``total_variance`` at each entry, when
+        they are few (the robust method's groups of realizations less one).
     """
 
     frequencies: np.ndarray
@@ -70,6 +73,7 @@ class FRFEstimate:
     noise_variance: np.ndarray | None
     total_variance: np.ndarray | None
     estimated: np.ndarray | None = None
+    total_variance_dof: int | None = None
 
 
 def _band_mask(bins, n_dft, max_frequency):
@@ -185,7 +189,8 @@ def robust_frf(U, Y, starts, period, *, n_transient=0, max_frequency=None):
         # Nonlinear distortions repeat in every period, so the period-to-period
         # spread of the FRF is due to the noise only.
         noise = _sample_variance(_block_frf(Yb, Ub), axis=1).mean(axis=0) / n_blocks
-    return FRFEstimate(bins[keep] / period, G, noise, total)
+    return FRFEstimate(bins[keep] / period, G, noise, total,
+                       total_variance_dof=None if total is None else n_blocks - 1)
 
 
 def _lpm_unknowns(n_inputs, degree):
