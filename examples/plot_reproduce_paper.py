@@ -90,7 +90,9 @@ for row, label in enumerate(["parameters", "Model Est", "Model Val", "Model Test
 # ----------------------------------------------
 # The estimation record is split into 500, 600 or 700 samples for fitting and
 # the rest for selecting the start and the iterate; "degree 2" has only
-# quadratic monomials, "degree 2, 3" quadratic and cubic ones.
+# quadratic monomials, "degree 2, 3" quadratic and cubic ones. The paper
+# varies the degree of the state equation (its table does not give the output
+# equation's); here ``degree`` sets both equations.
 paper3 = {(500, 2): (0.044729, 0.86985, 0.66801),
           (500, (2, 3)): (0.018701, 0.87438, 0.66404),
           (600, 2): (0.046441, 0.88059, 0.67691),

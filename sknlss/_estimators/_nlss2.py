@@ -101,6 +101,20 @@ def _state_ridge(linear, alpha):
     return 1e-9 * (np.sum(C**2) + alpha * (1.0 + np.sum(A**2)))
 
 
+def _linear_start_states(context, alpha):
+    """The linear start's blocks keyed by name, its ``(A, B, C, D)`` and the
+    states estimated from it on the fitted rows (paper eq. 14).
+
+    The output is taken as it is: the linear start's output offset (held in
+    the output biases, with ``estimate_x0``) is not removed first, which
+    was tried and not adopted (see the user guide)."""
+    values = context["model"].unpack(context["theta"])
+    linear = tuple(values[key] for key in "ABCD")
+    states = estimate_states(context["U_fit"], context["Y_fit"], context["starts_fit"],
+                             *linear, alpha, ridge=_state_ridge(linear, alpha))
+    return values, linear, states
+
+
 def _initial_theta(context, alpha, activation, n_neurons, seed):
     """Parameters of the linear model plus networks fitted on its estimated states.
 
@@ -110,10 +124,7 @@ def _initial_theta(context, alpha, activation, n_neurons, seed):
     """
     model, U_fit, Y_fit, starts_fit = (context[key] for key in
                                        ("model", "U_fit", "Y_fit", "starts_fit"))
-    values = model.unpack(context["theta"])
-    linear = tuple(values[key] for key in "ABCD")
-    states = estimate_states(U_fit, Y_fit, starts_fit, *linear, alpha,
-                             ridge=_state_ridge(linear, alpha))
+    values, linear, states = _linear_start_states(context, alpha)
     values.update(_fit_networks(states, U_fit, Y_fit, starts_fit, linear, n_neurons,
                                 activation, seed))
     if model.estimate_x0:
@@ -515,11 +526,7 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
             self.alpha_ = float(ALPHA_GRID[int(np.argmin(self.alpha_losses_))])
         else:
             self.alpha_ = float(self.alpha)
-        values = context["model"].unpack(context["theta"])
-        linear = tuple(values[key] for key in "ABCD")
-        self.states_init_ = estimate_states(
-            context["U_fit"], context["Y_fit"], context["starts_fit"], *linear, self.alpha_,
-            ridge=_state_ridge(linear, self.alpha_))
+        self.states_init_ = _linear_start_states(context, self.alpha_)[2]
 
     def _starting_points(self, context, start, seed):
         theta = _initial_theta(context, self.alpha_, self.activation, self.n_neurons, seed)

@@ -234,10 +234,9 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
     n_params_ : int
         Number of free parameters:
         ``n^2 + n n_u + n_y n + n_y n_u + n n_zeta + n_y n_eta``, plus ``n``
-        per sequence for x0 with ``estimate_x0`` (as the paper counts PNLSS-I)
-        and ``n_y``
-        for the output offset estimated with it (which the paper does not
-        count).
+        per sequence for x0 with ``estimate_x0`` and ``n_y`` for the output
+        offset estimated with it (the paper's table adds one parameter for
+        PNLSS-I's initial state; see the user guide).
     n_iter_ : int
         Number of accepted Levenberg-Marquardt steps.
     loss_history_ : ndarray of shape (n_iter_ + 1,)
