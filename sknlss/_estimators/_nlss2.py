@@ -160,8 +160,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         paper's lambda), in normalised units. Smaller values let the states
         follow the measured output more closely, so that the networks see
         more of the nonlinearity. ``"auto"`` follows the paper: it tries
-        the six values 0.01, 0.1, 1, 10, 100 and 1000 and keeps the value whose *initialised* model simulates
-        best on the validation rows (on the fitted rows when
+        the six values 0.01, 0.1, 1, 10, 100 and 1000 and keeps the value
+        whose *initialised* model simulates best on the validation rows (on
+        the fitted rows when
         ``validation_fraction=0``). That criterion favours large values, whose
         initial model is close to the linear one; on the Cascaded Tanks data
         the optimised models from ``alpha`` around 0.3 validated better.

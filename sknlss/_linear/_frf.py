@@ -64,8 +64,8 @@ class FRFEstimate:
         inputs of different bands); its entries are zero and not estimated.
         None: every entry.
     total_variance_dof : int or None
-        Complex degrees of freedom of ``total_variance`` at each entry, when
-        they are few (the robust method's groups of realizations less one).
+        Complex degrees of freedom of ``total_variance`` at each entry: the
+        robust method's groups of realizations less one (None for the LPM).
     """
 
     frequencies: np.ndarray
