@@ -2,9 +2,17 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 _SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+@pytest.fixture(autouse=True)
+def _seeded_global_random_state():
+    """Estimators left at random_state=None draw their random starts from
+    NumPy's global generator: seeded, every test repeats from run to run."""
+    np.random.seed(0)
 
 
 def _data_home():

@@ -428,11 +428,14 @@ def test_mimo_single_record_lpm():
     for t in range(4096):
         Y[t] = C @ x + D @ U[t]
         x = A @ x + B @ U[t]
+    clean = Y.copy()
     Y += 0.01 * rng.standard_normal(Y.shape)
     bla = BLAEstimator(n_states=3, estimate_x0=True).fit(U, Y)
     np.testing.assert_allclose(np.sort_complex(bla.poles_),
                                np.sort_complex(np.linalg.eigvals(A)), atol=2e-3)
-    assert np.all(np.std(Y - bla.predict(U), axis=0) < 0.0105)
+    # The error against the noise-free output: 5e-4 to 8e-4 over the draws 0-4
+    # of this record (the noise: 0.01).
+    assert np.all(np.std(clean - bla.predict(U), axis=0) < 0.002)
 
 
 def _low_pass_and_ignored_white(rng, n=2048):

@@ -65,14 +65,12 @@ def test_initialisation_improves_on_the_linear_model(records):
 @pytest.mark.parametrize("basis", [PolynomialBasis(3, kind="odd"), LegendreBasis(3),
                                    ChebyshevBasis(3)])
 def test_bases(basis, records):
-    # A median over random states: with random_state=None the starts change
-    # from run to run, and single starts reached 0.885 to 0.93 (the median
-    # over random states 0-9 is 0.999 for every basis).
+    # 0.999 to 0.9998 at random states 0-4 for every basis; the BLA's 0.883.
     u, y, _, _ = records
     models = [NLLFRRegressor(n_states=2, n_branches=2, basis=basis, max_iter=10,
                              random_state=seed).fit(u, y) for seed in range(3)]
     assert models[0].coefficients_.shape == (2, basis.n_functions)
-    assert np.median([model.score(u, y) for model in models]) > 0.9
+    assert np.median([model.score(u, y) for model in models]) > 0.99
     assert clone(models[0]).basis == basis
 
 

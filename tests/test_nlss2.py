@@ -53,11 +53,16 @@ def test_fit_beats_the_linear_model(nonlinear_records):
     (u, y), (u_test, y_test) = nonlinear_records
     # The paper's cost on 400 noise-free samples of a weakly nonlinear system
     # (the defaults' weight decay, a prior, restrains a record this short).
-    model = NLSS2Regressor(n_states=2, max_iter=50, weight_decay=0.0, n_init=1,
-                           validation_fraction=0.0, random_state=0).fit(u, y)
-    linear = BLAEstimator(n_states=2).fit(u, y)
-    nonlinear_error = rms_error(y_test, model.predict(u_test))
-    assert nonlinear_error < 0.3 * rms_error(y_test, linear.predict(u_test))
+    # The test error over the BLA's was 0.229, 0.452, 0.247, 0.309 and 0.133
+    # at random states 0-4 (median 0.247; medians of three consecutive
+    # random states 0.247 to 0.309).
+    models = [NLSS2Regressor(n_states=2, max_iter=50, weight_decay=0.0, n_init=1,
+                             validation_fraction=0.0, random_state=seed).fit(u, y)
+              for seed in range(5)]
+    linear_error = rms_error(y_test, BLAEstimator(n_states=2).fit(u, y).predict(u_test))
+    ratios = [rms_error(y_test, model.predict(u_test)) / linear_error for model in models]
+    assert np.median(ratios) < 0.4
+    model = models[0]
     assert model.loss_history_[-1] < model.loss_history_[0]
     assert model.n_iter_ == len(model.loss_history_) - 1
     assert model.validation_loss_history_ is None
@@ -132,7 +137,8 @@ def test_mimo_with_sequences_and_holdout():
         model.fit(u, y, sequence_id=sequence_id)
     assert model.predict(u, sequence_id=sequence_id).shape == (300, 2)
     assert model.validation_loss_history_.shape == model.loss_history_.shape
-    assert model.score(u, y, sequence_id=sequence_id) > 0.5
+    # 0.9978 to 0.9989 at random states 0-4; the BLA's 0.979.
+    assert model.score(u, y, sequence_id=sequence_id) > 0.99
 
 
 def test_multistart_is_reproducible_and_parallel(nonlinear_records):
@@ -162,7 +168,6 @@ def test_weight_decay_shrinks_the_network_weights(nonlinear_records):
         decayed = NLSS2Regressor(n_states=2, max_iter=20, weight_decay=100.0,
                                  random_state=0).fit(u, y)
     assert weight_norm(decayed) < weight_norm(free)
-    assert decayed.score(u, y) > 0.9
 
 
 def test_alpha_auto_selects_from_the_grid(nonlinear_records):

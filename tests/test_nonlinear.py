@@ -86,7 +86,10 @@ def test_estimate_x0(name, record):
     assert np.any(model.x0_ != 0)
     assert model.n_params_ == model.bla_.n_params_ + _terms_count(model)
     predicted = model.predict(u)
-    assert rms_error(y_moving[:20], predicted[:20]) < np.std(y_moving)
+    # The first samples, which the initial state sets: 1e-6 to 0.29 times the
+    # output's standard deviation over the estimators at random states 0-4;
+    # 0.92 for the BLA without an initial state.
+    assert rms_error(y_moving[:20], predicted[:20]) < 0.5 * np.std(y_moving)
 
 
 @pytest.mark.parametrize("name", FACTORIES)
@@ -276,12 +279,14 @@ def test_stability_penalty_and_weight_decay(name, record):
     plain = FACTORIES[name](n_states=2).fit(u, y)
     regularised = FACTORIES[name](n_states=2, stability_penalty=10.0,
                                   weight_decay=0.1).fit(u, y)
-    # The penalised cost is larger than the plain one at the same parameters,
-    # and the search still lowers it.
-    assert regularised.loss_history_[0] > 0
+    # The options reach the search: the fits differ (the largest difference of
+    # the predictions was 9e-4 to 0.32 times the output's standard deviation
+    # over the four estimators), and the search lowers the penalised cost.
+    # Their effects are tested per option (the local radius and the size of
+    # the terms in test_pnlss.py, the networks' weights in test_nlss2.py).
     assert regularised.loss_history_[-1] <= regularised.loss_history_[0]
     assert np.all(np.isfinite(regularised.predict(u)))
-    assert np.all(np.isfinite(plain.predict(u)))
+    assert np.max(np.abs(regularised.predict(u) - plain.predict(u))) > 1e-5 * np.std(y)
 
 
 @pytest.mark.parametrize("name", FACTORIES)

@@ -27,19 +27,23 @@ def _max_local_radius(model, u):
     return np.abs(np.linalg.eigvals(jacobians)).max()
 
 
-def test_stability_penalty_makes_the_model_locally_contracting():
+def test_stability_penalty_pulls_the_local_radius_towards_one():
     # This system is locally expanding (0.6 + 0.4 x > 1) where x > 1, which
-    # these data reach: the penalty trades some accuracy for a contracting model.
+    # these data reach: a larger penalty trades some accuracy for a smaller
+    # largest local radius along the trajectory (measured: 1.116 and score
+    # 0.992 at 1e2, 1.007 and 0.981 at 1e4, 1.0005 and 0.979 at 1e6; the BLA
+    # scores 0.916).
     rng = np.random.default_rng(0)
     u = 0.3 * rng.normal(size=(400, 1))
     y = _quadratic_system(u)
     options = dict(n_states=1, degree=2, max_iter=40, **PLAIN)
-    penalised = _fit_quiet(PNLSSRegressor(**{**options, "stability_penalty": 1e4}), u, y)
+    light, heavy = (_fit_quiet(PNLSSRegressor(**{**options, "stability_penalty": penalty}),
+                               u, y) for penalty in (1e2, 1e4))
     # The true local radius 0.6 + 0.4 x exceeds 1.2 where x > 1.5.
     assert y.max() > 1.5
-    assert _max_local_radius(penalised, u) < 1.01
-    assert penalised.score(u, y) > 0.95
-    assert penalised.loss_history_[-1] < penalised.loss_history_[0]
+    assert _max_local_radius(heavy, u) < _max_local_radius(light, u) - 0.05
+    assert heavy.score(u, y) > BLAEstimator(n_states=1).fit(u, y).score(u, y) + 0.03
+    assert heavy.loss_history_[-1] < heavy.loss_history_[0]
 
 
 def test_weight_decay_shrinks_the_polynomial_terms():
@@ -75,7 +79,9 @@ def test_reference_system_time_cost(reference):
     X = data.X[estimation].reshape(2, 3, period)[:, 0].reshape(-1, 1)
     y = data.y[estimation].reshape(2, 3, period).mean(axis=1).ravel()
     # The median over random states 0-2: over 0-9 the test RMS was 2.79e-4 to
-    # 2.98e-4 (median 2.86e-4), close to the noise of the single test period.
+    # 2.98e-4 (median 2.86e-4), close to the noise of the single test period
+    # (1.36e-4 RMS). The bound is the largest median of three consecutive
+    # random states there, 2.94e-4, plus the single states' spread, 1.9e-5.
     models, errors = [], []
     for seed in (0, 1, 2):
         model = PNLSSRegressor(2, period=period, n_transient=period, max_iter=60,
@@ -88,7 +94,7 @@ def test_reference_system_time_cost(reference):
     assert all(model.n_params_ == 4 + 2 + 2 + 1 + 2 * 16 + 16 == 57 for model in models)
     bla = BLAEstimator(2, period=period).fit(X, y, sequence_id=np.repeat([0, 1], period))
     linear = _reference_test_rms(bla, data, test, period)
-    assert np.median(errors) <= 3e-4 < 0.1 * linear
+    assert np.median(errors) <= 3.2e-4 < 0.1 * linear
     assert all(model.loss_history_[-1] < 1e-3 * model.loss_history_[0] for model in models)
 
 
@@ -199,7 +205,8 @@ def test_initial_state_and_validation_split():
         with_x0 = PNLSSRegressor(1, degree=2, estimate_x0=True, max_iter=30,
                                  **{**PLAIN, "validation_fraction": 0.2}).fit(u, y)
         without = PNLSSRegressor(1, degree=2, max_iter=30, **PLAIN).fit(u, y)
-    assert rms_error(y, with_x0.predict(u)) < 1e-4
+    # A system of the model's class, noise-free: recovered to rounding (5e-17).
+    assert rms_error(y, with_x0.predict(u)) < 1e-10
     assert rms_error(y, with_x0.predict(u)) < 0.1 * rms_error(y, without.predict(u))
     history = with_x0.validation_loss_history_
     assert history.shape == with_x0.loss_history_.shape
@@ -210,7 +217,7 @@ def test_center_makes_model_offset_invariant():
     rng = np.random.default_rng(0)
     u = 0.2 * rng.normal(size=(300, 1))
     y = _quadratic_system(u)
-    model = PNLSSRegressor(1, degree=2, center=True, max_iter=10)
+    model = PNLSSRegressor(1, degree=2, center=True, max_iter=10, random_state=0)
     a = _fit_quiet(clone(model), u, y).predict(u)
     b = _fit_quiet(clone(model), u + 3.0, y - 1.0).predict(u + 3.0)
     np.testing.assert_allclose(b, a - 1.0, atol=1e-8)

@@ -110,9 +110,15 @@ def test_nearly_linear_at_small_amplitude(make):
 
 @pytest.mark.parametrize("make", OPEN_LOOP, ids=_ids(OPEN_LOOP))
 def test_test_input_leaves_the_estimation_amplitude_at_its_end(make):
-    data = make(random_state=0)
-    n_end = data.X_test.shape[0] // 10
-    assert data.X_test[-n_end:].std() > 1.25 * data.X_est.std()
+    # The ramp ends at 1.5 times the estimation level; the RMS of the last tenth
+    # of one draw scatters about it (1.11 to 1.56 over random states 0-19; the
+    # medians over 0-2 are 1.315, 1.351 and 1.342).
+    ratios = []
+    for seed in range(3):
+        data = make(random_state=seed)
+        n_end = data.X_test.shape[0] // 10
+        ratios.append(data.X_test[-n_end:].std() / data.X_est.std())
+    assert np.median(ratios) > 1.2
 
 
 def test_drive_test_reference_leaves_the_estimation_range_at_its_end():
