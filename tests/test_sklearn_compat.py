@@ -22,6 +22,7 @@ from sklearn.utils.estimator_checks import parametrize_with_checks
 from sknlss import (
     BLAEstimator,
     DecoupledPNLSS,
+    LegendreBasis,
     NLLFRRegressor,
     NLSS2Regressor,
     PNLSSRegressor,
@@ -240,6 +241,11 @@ def test_nested_parameters_and_clone():
         PNLSSRegressor(n_states=2, max_iter=5),
         NLSS2Regressor(n_states=2, max_iter=5, random_state=0),
         DecoupledPNLSS(n_states=2, rank=2, max_iter=5, random_state=0),
+        NLLFRRegressor(n_states=2, max_iter=5, random_state=0),
+        NLLFRRegressor(n_states=2, n_branches=2, basis=LegendreBasis(1, shift=True),
+                       max_iter=5, random_state=0),
+        HoldoutSearch(NLLFRRegressor(n_states=2, max_iter=5, n_init=1),
+                      validation_fractions=(0.2, 0.3), param_grid={"n_branches": [1, 2]}),
     ],
     ids=lambda est: type(est).__name__,
 )
