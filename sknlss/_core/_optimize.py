@@ -19,6 +19,7 @@ from threadpoolctl import ThreadpoolController
 
 from ..exceptions import warn_at_caller
 
+
 @cache
 def _threadpools():
     """The loaded thread pools, found once, at the first call (after NumPy's

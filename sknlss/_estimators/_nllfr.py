@@ -259,7 +259,7 @@ def _inference_and_learning(problem, theta, V, bias, basis, seed):
         residual = (error - _response(A, Bw, C, Dw, w, starts))[rows].ravel()
         terms = {"V": Vp, "W": W, "coefficients": np.array(coefficients)}
         if bias is not None:
-            terms["bias"] = p[V_end:].copy()
+            terms["bias"] = b.copy()
         return residual, terms
 
     def residual(p):

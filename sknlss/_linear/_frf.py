@@ -246,10 +246,9 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
     return n_bins, 0
 
 
-def _lpm_windows(Uf, Yf, centres, width, order, bins=None):
+def _lpm_windows(Uf, Yf, centres, width, order, bins):
     """LPM fits of the windows centred on the bins ``centres`` (0-based in
-    ``Uf`` and ``Yf``, whose DFT bin numbers are ``bins``, consecutive by
-    default): FRF, noise variance of the outputs, the variance gain of each
+    ``Uf`` and ``Yf``, whose DFT bin numbers are ``bins``): FRF, noise variance of the outputs, the variance gain of each
     FRF unknown, degrees of freedom, whether the regressors are rank
     deficient, and the power of each input in each window."""
     n_bins, n_u = Uf.shape
@@ -257,12 +256,10 @@ def _lpm_windows(Uf, Yf, centres, width, order, bins=None):
     # window of bin k: the `width` bins closest to it that lie in 1..n_bins
     first = np.clip(centres - half, 0, n_bins - width)
     index = first[:, None] + np.arange(width)
-    if bins is None:
-        offset = (index - centres[:, None]) / max(half, 1)
-    else:
-        # The polynomials are in frequency, whatever the spacing of the bins.
-        spacing = (bins[-1] - bins[0]) / max(bins.size - 1, 1)
-        offset = (bins[index] - bins[centres][:, None]) / (max(half, 1) * spacing)
+    # The polynomials are in frequency, whatever the spacing of the bins (the
+    # spacing is 1 for consecutive bins).
+    spacing = (bins[-1] - bins[0]) / max(bins.size - 1, 1)
+    offset = (bins[index] - bins[centres][:, None]) / (max(half, 1) * spacing)
     powers = offset[..., None] ** np.arange(order + 1)  # (bin, width, order+1)
     Uw = Uf[index]  # (bin, width, n_u)
     # regressors: [r^s u_i] for every s and i, then [r^s] for the transient
@@ -307,7 +304,8 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     bin_power = np.sum(np.abs(Uf) ** 2, axis=1)
     excited = bin_power > EXCITATION_THRESHOLD * bin_power.max(initial=0.0)
     width, degree = lpm_window(n_u, order, n_bins, bandwidth)
-    record = _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, degree)
+    record = _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, degree,
+                       np.arange(n_bins))
     if n_u > 1 and width <= np.count_nonzero(excited) < n_bins:
         # Independent periodic inputs over several periods excite every k-th
         # bin only, or a multisine some lines only: a window of neighbouring
@@ -317,15 +315,15 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
         # separate more of the inputs' entries are kept.
         on_lines = _lpm_bins(Uf[excited], Yf[excited], frequencies[excited],
                              in_band[excited], excited[excited], width, degree,
-                             bins=np.flatnonzero(excited))
+                             np.flatnonzero(excited))
         if np.count_nonzero(on_lines[3]) > np.count_nonzero(record[3]):
             record = on_lines
     return record, n_u > 1 and not np.any(record[3])
 
 
-def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order, bins=None):
+def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order, bins):
     """The LPM record of :func:`_lpm_record` from the DFT bins ``Uf``, ``Yf``
-    (at ``frequencies``; DFT bin numbers ``bins``, consecutive by default),
+    (at ``frequencies``; DFT bin numbers ``bins``),
     with windows of ``width`` neighbouring bins centred on those ``in_band``;
     the bins not ``excited`` get no window power, hence no estimate."""
     n_u = Uf.shape[1]

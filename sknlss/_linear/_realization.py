@@ -186,8 +186,9 @@ def pole_radius_limit(poles, frequencies):
     have determined the damping: with noise-free periodic data of period
     256, a real pole at 0.99 is fitted at 0.976, and a resonance of radius
     0.995 midway between two lines at 0.988, each with a largest error of
-    the model's FRF at the lines of about 40 % of the FRF's largest value. A mode slower than ``N / (2 pi)`` samples, or narrower
-    than half the line spacing, needs a longer period or record.
+    the model's FRF at the lines of about 40 % of the FRF's largest value.
+    A mode slower than ``N / (2 pi)`` samples, or narrower than half the
+    line spacing, needs a longer period or record.
 
     Parameters
     ----------
