@@ -186,8 +186,10 @@ def test_a_grid_search_sets_the_basis_parameters(records):
 ])
 def test_bad_basis(basis, message, records):
     u, y, _, _ = records
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(ValueError, match=message) as caught:
         NLLFRRegressor(n_states=2, basis=basis).fit(u, y)
+    # The estimator's argument is named, the basis shown as the user wrote it.
+    assert str(caught.value).startswith(f"basis={basis!r} cannot be used: ")
 
 
 class _OwnFunctions:

@@ -268,6 +268,8 @@ def check_basis(basis):
     functions (``evaluate``, ``degrees``, ``n_functions``) are redefined, in a
     subclass or on the object itself, would be fitted with other functions
     than it describes, so it is refused here rather than fitted silently.
+    Parameters out of their family's range (a ValueError) are refused here too,
+    with the basis named as the estimator's argument.
     """
     if basis.code not in BASIS_CODES:
         raise TypeError(
@@ -281,6 +283,12 @@ def check_basis(basis):
             f"basis {basis!r} redefines {', '.join(redefined)} of its family: the compiled "
             "kernels would apply the family's functions, not these. Subclass a family "
             f"({_FAMILIES}) only to change its parameters.")
+    try:
+        basis.degrees, basis.shifted
+    except ValueError as error:
+        # The family checks its parameters where they are used; the user set
+        # them through the estimator's ``basis`` argument.
+        raise ValueError(f"basis={basis!r} cannot be used: {error}") from error
 
 
 class BasisConstraint(HasMethods):
