@@ -9,7 +9,7 @@ from sklearn.metrics import r2_score
 from sknlss import SimulationDivergedWarning
 from sknlss._core._model import StateSpaceModel
 from sknlss._core._sequences import (delayed_input, holdout_masks, periodic_sequences,
-                                     sequence_bounds, transient_mask)
+                                     sequence_bounds, transient_mask, undelayed_input)
 from sknlss._estimators._base import _BaseStateSpace
 
 
@@ -93,7 +93,15 @@ def test_delayed_input(n_periods, delays, period, seed):
                     else:
                         expected = 0.0
                     assert delayed[t, j] == expected
+        # Undone, the delay gives the input back, but for the samples that
+        # reach the model only after a sequence that does not repeat.
+        undone = undelayed_input(delayed, starts, np.array(delays))
+        for k, (begin, end) in enumerate(zip(starts[:-1], starts[1:])):
+            for j, lag in enumerate(delays):
+                kept = end if with_period and repeating[k] else end - lag
+                np.testing.assert_array_equal(undone[begin:kept, j], U[begin:kept, j])
     assert delayed_input(U, starts, np.zeros(len(delays), int)) is U
+    assert undelayed_input(U, starts, np.zeros(len(delays), int)) is U
 
 
 # ------------------------------------------------------- the base contract

@@ -124,6 +124,33 @@ def test_fit_recovers_a_decoupled_system(wiener_data, wiener_model):
     assert rms_error(_wiener_system(u_new), model.predict(u_new)) < 1e-8 * np.std(y)
 
 
+def test_a_delayed_input_is_decoupled_in_step_with_the_states(wiener_data, monkeypatch):
+    # The branches are sampled where the PNLSS model goes: its states on the
+    # user's input, which it delays itself, beside the input delayed once.
+    u, y = wiener_data
+    delay = 3
+    y_late = np.concatenate([np.zeros(delay), y[:-delay]])
+    seen = {}
+    prepare = DecoupledPNLSS._prepare_starts
+
+    def spy(self, context):
+        prepare(self, context)
+        seen.update(context)
+
+    monkeypatch.setattr(DecoupledPNLSS, "_prepare_starts", spy)
+    model = DecoupledPNLSS(
+        n_states=2, rank=1, input_delay=delay,
+        pnlss=PNLSSRegressor(degree=2, max_iter=30, center=False, **PLAIN),
+        max_iter=30, n_restarts=3, random_state=0, **PLAIN,
+    ).fit(u, y_late)
+    rows = seen["rows"].fit_rows[seen["rows"].original]
+    states = model.pnlss_.simulate(u, return_states=True)[1]
+    np.testing.assert_allclose(seen["points"][:, :2], states[rows], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(seen["points"][:, 2:], seen["U"][rows])
+    # Noise-free data of the model's class, delayed: recovered as without delay.
+    assert rms_error(y_late, model.predict(u)) < 1e-8 * np.std(y)
+
+
 def test_a_dataframe_fit_warns_nothing_about_feature_names(wiener_data):
     pd = pytest.importorskip("pandas")
     u, y = wiener_data
@@ -151,6 +178,7 @@ def test_fitted_attributes(wiener_model):
     assert model.branch_coefficients_.shape == (rank, d - 1)
     lower, upper = model.branch_input_range_
     assert lower.shape == (rank,) and np.all(lower < upper)
+    assert model.extrapolation_ == "linear"
     assert model.n_params_ == n * n + n * n_u + n_y * n + n_y * n_u + (
         n + n_u + n + n_y + d - 1) * rank
     assert model.n_iter_ == len(model.loss_history_) - 1

@@ -87,6 +87,14 @@ def test_extrapolation_changes_only_predictions_beyond_the_estimation_range(reco
     states = linear.simulate(u, return_states=True)[1]
     z = states @ linear.Cz_.T + (u - linear.u_offset_) / linear.u_scale_ @ linear.Dz_.T
     np.testing.assert_allclose(linear.branch_input_range_, [[z.min()], [z.max()]])
+    # A shifting basis's branches take z + bz_ as argument, anchored at bz_.
+    shifted = NLLFRRegressor(basis=LegendreBasis(2, shift=True), **options).fit(u, y)
+    states = shifted.simulate(u, return_states=True)[1]
+    z = (states @ shifted.Cz_.T + (u - shifted.u_offset_) / shifted.u_scale_ @ shifted.Dz_.T
+         + shifted.bz_)
+    np.testing.assert_allclose(shifted.branch_input_range_,
+                               [np.minimum(z.min(axis=0), shifted.bz_),
+                                np.maximum(z.max(axis=0), shifted.bz_)])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SimulationDivergedWarning)
         beyond = continued.predict(4.0 * u_test)

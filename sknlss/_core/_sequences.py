@@ -235,3 +235,26 @@ def delayed_input(U, starts, delay, period=None):
             if lag and repeating[k]:
                 delayed[begin:begin + lag, j] = U[begin + np.arange(-lag, 0) % period, j]
     return delayed
+
+
+def undelayed_input(delayed, starts, delay):
+    """The input that :func:`delayed_input` delayed into ``delayed``.
+
+    Column ``j`` of every sequence is advanced by ``delay[j]`` samples. Its
+    last ``delay[j]`` samples come back from the sequence's start: the
+    original ones where the delay filled that start with the periodic
+    continuation, zero otherwise; they would enter the model only after the
+    end of the sequence.
+
+    Returns
+    -------
+    U : ndarray of shape delayed.shape
+        ``delayed`` itself when no column is delayed.
+    """
+    if not np.any(delay):
+        return delayed
+    U = np.empty_like(delayed)
+    for begin, end in zip(starts[:-1], starts[1:]):
+        for j, lag in enumerate(delay):
+            U[begin:end, j] = np.roll(delayed[begin:end, j], -lag)
+    return U

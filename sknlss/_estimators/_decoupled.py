@@ -15,6 +15,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import StrOptions
 
 from .._core._model import parameter_count
+from .._core._sequences import undelayed_input
 from .._terms._bases import PolynomialBasis
 from .._terms._branches import BranchTerms
 from .._terms._cpd import decouple_polynomial
@@ -249,7 +250,10 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
     branch_input_range_ : ndarray of shape (2, rank)
         Lowest and highest value of each branch input on the estimation
         record simulated by the fitted model: beyond it the branches go on as
-        ``extrapolation`` says.
+        ``extrapolation_`` says.
+    extrapolation_ : {"linear", "continue"}
+        The continuation of the branches beyond ``branch_input_range_``: the
+        ``extrapolation`` of the fit.
     x0_ : ndarray of shape (n_states,) or (n_sequences, n_states)
         Initial state (zero unless ``estimate_x0``); with ``estimate_x0``,
         one per sequence when the model was fitted on several: ``predict``
@@ -542,7 +546,9 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
 
     def _prepare_starts(self, context):
         pnlss, starts, rows = self.pnlss_, context["starts"], context["rows"]
-        X = context["U"] * self.u_scale_ + self.u_offset_
+        # The PNLSS model delays its input itself: it is given the user's input.
+        X = (undelayed_input(context["U"], starts, self.input_delay_) * self.u_scale_
+             + self.u_offset_)
         sequence_id = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
         with warnings.catch_warnings():
             # The rows are the user's, rebuilt as an array: a PNLSS model
@@ -603,6 +609,7 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         self.V_, self.W_ = values["V"], values["W"]
         self.branch_coefficients_ = values["coefficients"]
         self.branch_input_range_ = self._model.terms.input_range
+        self.extrapolation_ = "continue" if self._model.terms.continued else "linear"
 
     def _terms_values(self):
         return {"V": self.V_, "coefficients": self.branch_coefficients_, "W": self.W_}

@@ -494,9 +494,11 @@ class NLLFRRegressor(_BaseNonlinearStateSpace):
     basis_ : basis object
         The basis of the kept model (the chosen one with ``basis=None``).
     branch_input_range_ : ndarray of shape (2, n_branches)
-        Lowest and highest value of each branch input on the estimation
-        record simulated by the fitted model: beyond it the branches go on as
-        ``extrapolation_`` says.
+        Lowest and highest value of each branch's argument on the estimation
+        record simulated by the fitted model: of ``z_l``, or with a shifting
+        basis of ``z_l + bz_[l]`` (the range then includes ``bz_[l]``, the
+        branch's anchor). Beyond it the branches go on as ``extrapolation_``
+        says.
     extrapolation_ : {"linear", "continue"}
         The continuation of the branches beyond ``branch_input_range_``
         (``extrapolation``, with ``"auto"`` resolved for ``basis_``).
