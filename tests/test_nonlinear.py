@@ -243,13 +243,23 @@ def test_period_of_an_input_that_does_not_repeat_warns(name, periodic):
 
 
 @pytest.mark.parametrize("name", FACTORIES)
-def test_period_without_a_transient_warns(name, periodic):
+def test_period_without_a_long_enough_transient_warns(name, periodic):
     # period alone prepends nothing: the fit starts every sequence from zero,
     # as a toolbox user who sets the period would not expect.
     X, y, sequence_id, period = periodic
     with pytest.warns(DataWarning, match=rf"period={period} with n_transient=0 prepends "
                                          rf"nothing.*n_transient={period}"):
         FACTORIES[name](n_states=2, period=period, n_init=1).fit(X, y, sequence_id=sequence_id)
+    # The oscillator settles to 1 % in about 26 samples: 3 leave most of its
+    # start transient in the cost.
+    with pytest.warns(DataWarning, match=rf"period={period} with n_transient=3 prepends "
+                                         r"fewer samples .* at least \d+\."):
+        FACTORIES[name](n_states=2, period=period, n_transient=3, n_init=1).fit(
+            X, y, sequence_id=sequence_id)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message=".*prepends fewer samples")
+        FACTORIES[name](n_states=2, period=period, n_transient=period, n_init=1).fit(
+            X, y, sequence_id=sequence_id)
     # An estimated initial state per sequence starts each one as it should.
     with warnings.catch_warnings():
         warnings.filterwarnings("error", message=".*prepends nothing")

@@ -121,8 +121,10 @@ def _frequency_rows(values, blocks, period, weights):
 
     ``values`` has shape (n_samples, n_outputs, ...) (residuals, or Jacobian rows
     with a trailing parameter axis); the DFT is taken over the samples of each
-    period, scaled by ``1 / sqrt(period)`` so that the cost keeps the size of the
-    time-domain cost.
+    period, scaled by ``1 / sqrt(period)``, at the lines from DC to Nyquist (paper
+    eq. 17): unweighted, the cost is about half the time-domain one (Parseval
+    counts the lines between DC and Nyquist twice), and the imaginary parts of
+    DC and Nyquist are rows of zeros.
     """
     parts = []
     extra = (1,) * (values.ndim - 2)

@@ -141,11 +141,12 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         meta-estimators, ``None`` has no parameters to set.
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
-        sequence must be a whole number of periods; each sequence is then
-        simulated in steady state by prepending its last ``n_transient``
-        samples (excluded from the cost), in ``fit`` and in ``predict`` (for
-        sequences whose input repeats with ``period``, unless ``x0`` is
-        passed).
+        sequence must be a whole number of periods, the same number in every
+        sequence (the linear start's robust method averages them); each
+        sequence is then simulated in steady state by prepending its last
+        ``n_transient`` samples (excluded from the cost), in ``fit`` and in
+        ``predict`` (for sequences whose input repeats with ``period``, unless
+        ``x0`` is passed).
     cost : {"time", "frequency"}, default="time"
         Time-domain simulation error, or its per-period DFT weighted by the
         inverse noise standard deviation (paper eq. 17; needs ``period``).
@@ -161,7 +162,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         along the trajectory of the starting point, so that it acts on each
         term's contribution whatever the units. Like a prior, it does not grow
         with the record: it restrains the terms on a short record and fades on
-        a long one.
+        a long one. Its share of the cost grows as the noise falls: lower it
+        on long, clean records (see the user guide).
     max_iter : int, default=100
         Maximum number of Levenberg-Marquardt iterations of the re-optimisation.
     tol : float, default=1e-9

@@ -176,11 +176,12 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         hold it). A long ``n_transient`` holds it (see ``n_transient``).
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
-        sequence must be a whole number of periods; each sequence is then
-        simulated in steady state by prepending its last ``n_transient``
-        samples (excluded from the cost), in ``fit`` and in ``predict`` (for
-        sequences whose input repeats with ``period``, unless ``x0`` is
-        passed).
+        sequence must be a whole number of periods, the same number in every
+        sequence (the linear start's robust method averages them); each
+        sequence is then simulated in steady state by prepending its last
+        ``n_transient`` samples (excluded from the cost), in ``fit`` and in
+        ``predict`` (for sequences whose input repeats with ``period``, unless
+        ``x0`` is passed).
     cost : {"time", "frequency"}, default="time"
         Time-domain simulation error, or its per-period DFT weighted by the
         inverse noise standard deviation (paper eq. 17; needs ``period``).
@@ -197,7 +198,8 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         along the trajectory of the starting point, so that it acts on each
         term's contribution whatever the units. Like a prior, it does not grow
         with the record: it restrains the terms on a short record and fades on
-        a long one.
+        a long one. Its share of the cost grows as the noise falls: lower it
+        on long, clean records (see the user guide).
     refine_linear : bool, default=True
         Before estimating the states, refine the linear model by minimising
         its simulation error (with its own initial state, unless held, and

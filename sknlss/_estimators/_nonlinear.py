@@ -505,6 +505,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                             steady_state_period=self.period)
         linear = self._linear_start(U, Y, starts, bla_rows.fit_rows[bla_rows.original])
         settling_time = _settling_time(linear, U, Y, starts)
+        self._warn_if_not_steady(settling_time)
         self.fit_transient_ = self._cost_transient(settling_time, starts)
         rows = {share: fit_rows(U, Y, starts, n_transient=self._sequence_transients(starts),
                                 validation_fraction=self._sequence_fractions(share, starts),
@@ -548,6 +549,23 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         # does, it moves into the offset of the output's normalisation.
         self.y_offset_ = self.y_offset_ + self.y_scale_ * self.output_offset_
         self._warn_if_worse_than_the_mean(U, Y - self.output_offset_, starts)
+
+    def _warn_if_not_steady(self, settling_time):
+        """Warn when, with ``period``, the ``n_transient`` samples prepended to
+        every sequence are fewer than the linear start's settling time: the
+        sequences then start before their periodic steady state, and every
+        sample, the rest of the transient with them, enters the cost.
+        ``n_transient=0`` has its own warning (``_check_periodic``)."""
+        if (self.period is None or self.estimate_x0 or self.n_transient == 0
+                or not settling_time > self.n_transient or np.isinf(settling_time)):
+            return
+        warn_at_caller(
+            f"{type(self).__name__}: period={self.period} with n_transient="
+            f"{self.n_transient} prepends fewer samples than the slowest mode of the linear "
+            f"model that shows in the output takes to settle (to 1 %: {settling_time} "
+            "samples): the sequences start before their periodic steady state, and what "
+            "remains of the transient is fitted and scored. Set n_transient to at least "
+            f"{settling_time}.", DataWarning)
 
     def _warn_if_unweighted(self, problem):
         """Warn when the frequency-domain cost of ``problem`` (the largest

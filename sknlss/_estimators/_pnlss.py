@@ -97,11 +97,12 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         nonlinear optimisation from the BLA itself, as in the paper.
     period : int, default=None
         Number of samples per period of a periodic excitation. When set, every
-        sequence must be a whole number of periods; each sequence is then
-        simulated in steady state by prepending its last ``n_transient``
-        samples (excluded from the cost), in ``fit`` and in ``predict`` (for
-        sequences whose input repeats with ``period``, unless ``x0`` is
-        passed).
+        sequence must be a whole number of periods, the same number in every
+        sequence (the linear start's robust method averages them); each
+        sequence is then simulated in steady state by prepending its last
+        ``n_transient`` samples (excluded from the cost), in ``fit`` and in
+        ``predict`` (for sequences whose input repeats with ``period``, unless
+        ``x0`` is passed).
     cost : {"time", "frequency"}, default="time"
         Time-domain simulation error, or its per-period DFT at all lines
         weighted by the inverse noise standard deviation (paper eq. 17; needs
@@ -122,7 +123,8 @@ class PNLSSRegressor(_BaseNonlinearStateSpace):
         along the trajectory of the starting point, so that it acts on each
         term's contribution whatever the units. Like a prior, it does not grow
         with the record: it restrains the terms on a short record and fades on
-        a long one.
+        a long one. Its share of the cost grows as the noise falls: lower it
+        on long, clean records (see the user guide).
     bla : BLAEstimator, default=None
         Settings of the linear model used for the initialisation; it is given
         this model's ``n_states``, ``input_delay``, ``estimate_x0`` (a value of
