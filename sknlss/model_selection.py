@@ -28,7 +28,12 @@ __all__ = ["HoldoutSearch"]
 
 
 def _fit_candidate(estimator, params, X, y, sequence_id):
-    return clone(estimator).set_params(**params).fit(X, y, sequence_id=sequence_id)
+    """A fitted candidate and the warnings of its fit, as ``(message,
+    category)`` pairs: those of a joblib worker would not reach the caller."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = clone(estimator).set_params(**params).fit(X, y, sequence_id=sequence_id)
+    return model, [(warning.message, warning.category) for warning in caught]
 
 
 def _fitted_states(model):
@@ -216,8 +221,15 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
         self._validate_params()
         candidates, holdout_fraction = self._candidates()
         # A candidate whose numerics fail leaves the others standing.
-        models = run_starts(_fit_candidate, [(self.estimator, params, X, y, sequence_id)
-                                             for params in candidates], n_jobs=self.n_jobs)
+        outcomes = run_starts(_fit_candidate, [(self.estimator, params, X, y, sequence_id)
+                                               for params in candidates], n_jobs=self.n_jobs)
+        models = []
+        for outcome in outcomes:
+            if not isinstance(outcome, Exception):
+                outcome, caught = outcome
+                for message, category in caught:
+                    warn_at_caller(message, category)
+            models.append(outcome)
         fitted = [i for i, model in enumerate(models) if not isinstance(model, Exception)]
         if not fitted:
             raise models[0]

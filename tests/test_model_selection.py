@@ -7,7 +7,7 @@ import pytest
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 
-from sknlss import BLAEstimator, PNLSSRegressor
+from sknlss import BLAEstimator, DataWarning, PNLSSRegressor
 from sknlss.metrics import rms_error
 from sknlss.model_selection import HoldoutSearch, _holdout_errors
 
@@ -188,3 +188,17 @@ def test_a_dataframe_keeps_its_column_names():
         search = HoldoutSearch(PNLSSRegressor(n_states=1, degree=2, max_iter=3, n_init=1),
                                validation_fractions=(0.2, 0.3)).fit(X, y)
     np.testing.assert_array_equal(search.feature_names_in_, ["voltage"])
+
+
+@pytest.mark.parametrize("n_jobs", [None, 2])
+def test_the_candidates_warnings_reach_the_caller(n_jobs):
+    # Uncentred signals far from zero: every candidate's fit says so, from a
+    # worker process too.
+    u, y, _ = _quadratic_system(n_samples=200)
+    search = HoldoutSearch(PNLSSRegressor(n_states=1, degree=2, max_iter=2, center=False),
+                           validation_fractions=[0.2, 0.3], n_jobs=n_jobs)
+    with pytest.warns(DataWarning, match="the mean of output 0 is") as caught:
+        search.fit(u, y + 50.0)
+    offsets = [w for w in caught if "the mean of output 0 is" in str(w.message)]
+    assert len(offsets) == 2
+    assert all(w.filename == __file__ for w in offsets)

@@ -4,6 +4,7 @@ simulation-error core, for every estimator; the linear model they start from."""
 import re
 import warnings
 
+import joblib
 import numpy as np
 import pytest
 from scipy.signal import lfilter
@@ -11,6 +12,7 @@ from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.metrics import r2_score
 from sklearn.utils._param_validation import InvalidParameterError
+from threadpoolctl import threadpool_info
 from _hints import named_delays
 
 from sknlss import (
@@ -939,3 +941,25 @@ def test_an_input_of_one_line_is_refused(name):
     u = np.sin(2 * np.pi * 30 * np.arange(600) / 600)[:, None]
     with pytest.raises(ValueError, match=r"the 1 frequency line\(s\) that the input excites"):
         FACTORIES[name](n_states=2).fit(u, u[:, 0] + 0.3 * u[:, 0] ** 3)
+
+
+def _blas_threads():
+    return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_starts_in_threads_fit_as_in_sequence(name, record):
+    # A grid search whose workers fit estimators with n_jobs runs their
+    # starts in threads: starts that share a hold-out share share its
+    # problem, and each keeps its own weight-decay scale.
+    u, y = record
+    settings = dict(n_states=2, n_init=3, validation_fraction=0.3, weight_decay=10.0)
+    sequential = FACTORIES[name](**settings).set_params(random_state=0).fit(u, y)
+    before = _blas_threads()
+    with joblib.parallel_config(backend="threading"):
+        threaded = FACTORIES[name](n_jobs=2, **settings).set_params(random_state=0).fit(u, y)
+    # The starts' one-thread limits overlap; the process's limits are
+    # restored once the last one ends (seen with more than one BLAS thread).
+    assert _blas_threads() == before
+    np.testing.assert_array_equal(threaded.start_losses_, sequential.start_losses_)
+    np.testing.assert_array_equal(threaded.predict(u), sequential.predict(u))

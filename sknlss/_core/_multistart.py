@@ -69,7 +69,7 @@ def fit_from(problem, candidates, *, label, **options):
     for theta0 in candidates:
         if getattr(problem, "weight_decay", 0):
             # The decay weighs each term's contribution from this start.
-            problem.set_decay_scale(theta0)
+            problem = problem.with_decay_scale(theta0)
         initial = problem.residual(theta0, True)
         if _finite(*initial):
             break

@@ -9,6 +9,8 @@ factorisation, and the smallest singular directions can be discarded (the
 output unchanged).
 """
 
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cache
 
@@ -29,11 +31,32 @@ def _threadpools():
     return ThreadpoolController()
 
 
+_limit_lock = threading.Lock()
+_limit_holders = {"count": 0, "limiter": None}
+
+
+@contextmanager
 def one_blas_thread():
     """A context in which BLAS runs on one thread: the factorisations of the
     library are small, and threads only add synchronisation (tenfold on two
-    cores, see DESIGN.md §2)."""
-    return _threadpools().limit(limits=1, user_api="blas")
+    cores, see DESIGN.md §2).
+
+    The limit is the process's: contexts that overlap, in the threads that
+    run starts side by side, share it, and the last to leave restores the
+    limits found by the first (each restoring its own would leave the last
+    restored, one thread, in place).
+    """
+    with _limit_lock:
+        if _limit_holders["count"] == 0:
+            _limit_holders["limiter"] = _threadpools().limit(limits=1, user_api="blas")
+        _limit_holders["count"] += 1
+    try:
+        yield
+    finally:
+        with _limit_lock:
+            _limit_holders["count"] -= 1
+            if _limit_holders["count"] == 0:
+                _limit_holders["limiter"].restore_original_limits()
 
 
 # Damping is raised by this factor after a rejected step and lowered by

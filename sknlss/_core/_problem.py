@@ -17,6 +17,7 @@ model:
 - the restriction to a subset of the parameters (e.g. the linear part first).
 """
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -256,7 +257,7 @@ class SimulationErrorProblem:
         sum of squared residuals: each parameter the terms decay
         (``decay_mask``) is scaled by the RMS of its direct effect on the
         terms along the trajectory of the starting point (see
-        :meth:`set_decay_scale`), so that the decay does not depend on the
+        :meth:`with_decay_scale`), so that the decay does not depend on the
         units of the signals or the parametrisation. Like a prior, its weight
         does not grow with the number of samples: it matters on short records
         and fades on long ones.
@@ -325,13 +326,19 @@ class SimulationErrorProblem:
         """``[x; u]`` at the cost rows, from the simulated states X."""
         return np.hstack([X[self.fit_rows], self.U[self.fit_rows]])
 
-    def set_decay_scale(self, theta):
-        """Fix the scale of the weight decay from the trajectory of ``theta``
-        (the starting point)."""
+    def with_decay_scale(self, theta):
+        """The problem with the scale of its weight decay fixed from the
+        trajectory of ``theta`` (a starting point), as a copy: the starts that
+        share a problem, in threads too, each keep their own scale."""
+        problem = copy.copy(self)
+        problem.decay_scale = self._decay_scale(theta)
+        return problem
+
+    def _decay_scale(self, theta):
         points = self._fitted_points(self.simulate(theta)[1])
         points = points[np.all(np.isfinite(points), axis=1)]
         scale = self.model.parameter_rms(theta, points) * self.model.terms.decay_mask()
-        self.decay_scale = np.nan_to_num(scale)
+        return np.nan_to_num(scale)
 
     # ------------------------------------------------------------- residual
     def residual(self, theta, jacobian):
@@ -423,7 +430,9 @@ class SimulationErrorProblem:
     def _decay_rows(self, theta, jacobian):
         """Rows of the weight decay (scaled terms' parameters) and their Jacobian."""
         if self.decay_scale is None:
-            self.set_decay_scale(theta)
+            # Outside a start (a search restricted to the linear part), the
+            # first point evaluated sets the scale.
+            self.decay_scale = self._decay_scale(theta)
         decayed = np.flatnonzero(self.decay_scale)
         columns = self.model.terms_columns[decayed]
         weight = np.sqrt(self.weight_decay) * self.decay_scale[decayed]
