@@ -225,11 +225,13 @@ class HoldoutSearch(MetaEstimatorMixin, RegressorMixin, BaseEstimator):
                                                for params in candidates], n_jobs=self.n_jobs)
         models = []
         for outcome in outcomes:
-            if not isinstance(outcome, Exception):
-                outcome, caught = outcome
-                for message, category in caught:
-                    warn_at_caller(message, category)
-            models.append(outcome)
+            if isinstance(outcome, Exception):
+                models.append(outcome)
+                continue
+            model, caught = outcome
+            for message, category in caught:
+                warn_at_caller(message, category)
+            models.append(model)
         fitted = [i for i, model in enumerate(models) if not isinstance(model, Exception)]
         if not fitted:
             raise models[0]

@@ -557,7 +557,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         sample, the rest of the transient with them, enters the cost.
         ``n_transient=0`` has its own warning (``_check_periodic``)."""
         if (self.period is None or self.estimate_x0 or self.n_transient == 0
-                or not settling_time > self.n_transient or np.isinf(settling_time)):
+                or np.isinf(settling_time) or settling_time <= self.n_transient):
             return
         warn_at_caller(
             f"{type(self).__name__}: period={self.period} with n_transient="
