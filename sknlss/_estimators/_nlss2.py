@@ -319,8 +319,9 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
         increasing order of ``alpha``.
     states_init_ : ndarray of shape (n_rows_before_holdout, n_states)
         States estimated from the linear model on each sequence up to its
-        held-out end (the cost transient included), from which the networks
-        are initialised. ``alpha_``, ``alpha_losses_`` and
+        held-out end (the cost transient included; with
+        ``validation_fraction="auto"``, the largest of the starts' shares),
+        from which the networks are initialised. ``alpha_``, ``alpha_losses_`` and
         ``states_init_`` belong to the networks' initialisation: they are not
         set when the record is too short for the networks and the linear
         model is kept without any start.
@@ -405,9 +406,10 @@ class NLSS2Regressor(_BaseNonlinearStateSpace):
     (paper eq. 14, by a banded least-squares solve);
     every network is fitted to its linear-model residual by
     :class:`~sklearn.neural_network.MLPRegressor` (L-BFGS, a different random
-    initialisation per start); the initial state starts at the mean of the
-    estimated first states of the sequences (and stays there when a long
-    ``n_transient`` holds it). Levenberg-Marquardt then minimises the
+    initialisation per start); with ``estimate_x0``, the initial state of
+    every sequence starts at its own first estimated state (zero for a
+    sequence with no fitted row) and stays there when a long ``n_transient``
+    holds it. Levenberg-Marquardt then minimises the
     simulation error on the fitted rows with the analytic Jacobian; with
     ``validation_fraction``,
     the iterate and the start with the lowest validation error are kept;
