@@ -27,6 +27,8 @@ import os
 import pickle
 import re
 import resource
+import subprocess
+import sys
 import warnings
 from collections import Counter
 from types import SimpleNamespace
@@ -1007,3 +1009,26 @@ def test_public_names_are_covered():
     assert set(metrics.__all__) == {"rms_error", "nrmse", "fit_percent",
                                     "make_transient_scorer"}
     assert set(plotting.__all__) == {"plot_frf", "plot_simulation", "plot_error_spectrum"}
+
+
+@pytest.mark.slow
+def test_imports_and_simulates_where_numba_can_cache_nowhere():
+    # A read-only install run by a user without a home folder: numba finds no
+    # folder to cache in, and the kernels are compiled in the process instead
+    # (those with a signature at import: about 20 s).
+    script = """
+import sys
+sys.path.insert(0, sys.argv[1])
+from numba.core import caching
+caching.CacheImpl._locator_classes = []
+import numpy as np
+from sknlss._core import _kernels
+from sknlss.datasets import make_duffing
+data = make_duffing(n_samples=128, n_test_samples=128, random_state=0)
+print(_kernels.CACHE, np.isfinite(data.y_est).all())
+"""
+    package_parent = os.path.dirname(os.path.dirname(sknlss.__file__))
+    done = subprocess.run([sys.executable, "-c", script, package_parent],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["False", "True"]

@@ -73,6 +73,29 @@ from numba import njit, types
 from numba.core.typing.typeof import typeof_impl
 from numba.experimental.function_type import _get_wrapper_address
 
+def _cache_probe():
+    return 0
+
+
+def _cache_available():
+    """Whether numba can cache compiled functions of this package on disk.
+
+    numba caches next to the package or in the user's cache folder
+    (``NUMBA_CACHE_DIR`` names another); where none is writable (a read-only
+    install run by a user without a home folder), ``cache=True`` fails at
+    decoration and would make the package fail to import. The kernels are
+    then compiled in every process instead.
+    """
+    try:
+        njit(cache=True)(_cache_probe)
+    except RuntimeError:
+        return False
+    return True
+
+
+#: Whether the compiled functions are cached on disk (see ``_cache_available``).
+CACHE = _cache_available()
+
 #: Largest absolute normalised state or output value a simulation may reach
 #: before it is declared divergent. Normalised signals have unit standard
 #: deviation, so any physically meaningful trajectory stays many orders of
@@ -135,7 +158,7 @@ def function_pointer(function, signature):
     return _POINTERS[key]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _escaped(values, count, bound):
     """Whether one of the first ``count`` values is not finite or exceeds
     ``bound`` in absolute value."""
@@ -146,7 +169,7 @@ def _escaped(values, count, bound):
     return failed
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _step(A, B, C, D, h, s, x_next, y):
     """One sample of the model from the terms' values ``h`` at ``s = [x; u]``:
     writes ``x(t+1)`` to ``x_next`` and ``y(t)`` to ``y``; returns whether an
@@ -169,7 +192,7 @@ def _step(A, B, C, D, h, s, x_next, y):
     return _escaped(y, n_y, DIVERGENCE_BOUND)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _linear_part(theta, n, n_u, n_y):
     """Views of A, B, C, D in ``theta`` and the offset of the terms' parameters."""
     o_b = n * n
@@ -183,7 +206,7 @@ def _linear_part(theta, n, n_u, n_y):
     return A, B, C, D, o_terms
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _terms_buffers(theta, n, n_u, n_y, n_terms, work_init):
     """The terms' parameters in ``theta``, and the arrays the terms' functions
     write to: ``h``, ``dh/dx`` and a fresh work array."""
@@ -196,7 +219,7 @@ def _terms_buffers(theta, n, n_u, n_y, n_terms, work_init):
     types.Tuple((_F2, _F2, types.boolean))(
         _F1, _INT, _INT, _I1, _F1, _F2, _I1, _F2, types.FunctionType(EVALUATE)
     ),
-    cache=True,
+    cache=CACHE,
 )
 def simulate(theta, n_outputs, n_terms, spec, work_init, U, starts, x0, evaluate):
     """Free-run simulation of every sequence.
@@ -272,7 +295,7 @@ def simulate(theta, n_outputs, n_terms, spec, work_init, U, starts, x0, evaluate
         types.boolean, types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
         types.FunctionType(PARAMETER_JACOBIAN),
     ),
-    cache=True,
+    cache=CACHE,
 )
 def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, starts,
                   x0, estimate_x0, x0_per_sequence, jacobian_rows, with_local, evaluate,
@@ -435,7 +458,7 @@ def sensitivities(theta, n_outputs, n_terms, n_state_terms, spec, work_init, U, 
 @njit(
     _F3(_F1, _INT, _INT, _INT, _I1, _F1, _F2, types.FunctionType(EVALUATE),
         types.FunctionType(STATE_JACOBIAN)),
-    cache=True,
+    cache=CACHE,
 )
 def local_jacobians(theta, n_states, n_outputs, n_terms, spec, work_init, S, evaluate,
                     state_jacobian):
@@ -479,7 +502,7 @@ def local_jacobians(theta, n_states, n_outputs, n_terms, spec, work_init, S, eva
     _F2(_F1, _INT, _INT, _INT, _INT, _I1, _F1, _F2, _F3, types.float64,
         types.FunctionType(EVALUATE), types.FunctionType(STATE_JACOBIAN),
         types.FunctionType(PARAMETER_JACOBIAN)),
-    cache=True,
+    cache=CACHE,
 )
 def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, spec,
                           work_init, S, G, step, evaluate, state_jacobian,
@@ -536,7 +559,7 @@ def curvature_contraction(theta, n_states, n_outputs, n_terms, n_state_terms, sp
 @njit(
     _F1(_F1, _INT, _INT, _INT, _INT, _I1, _F1, _F2, types.FunctionType(EVALUATE),
         types.FunctionType(STATE_JACOBIAN), types.FunctionType(PARAMETER_JACOBIAN)),
-    cache=True,
+    cache=CACHE,
 )
 def parameter_rms(theta, n_states, n_outputs, n_terms, n_state_terms, spec, work_init, S,
                   evaluate, state_jacobian, parameter_jacobian):
@@ -574,19 +597,19 @@ def parameter_rms(theta, n_states, n_outputs, n_terms, n_state_terms, spec, work
 
 
 # ---------------------------------------------------------------- no terms
-@njit(EVALUATE, cache=True)
+@njit(EVALUATE, cache=CACHE)
 def no_terms_evaluate(theta_terms, spec, s, n_states, h, work):
     """Terms of a linear model: zero."""
     h[:] = 0.0
 
 
-@njit(STATE_JACOBIAN, cache=True)
+@njit(STATE_JACOBIAN, cache=CACHE)
 def no_terms_state_jacobian(theta_terms, spec, s, n_states, dh_dx, work):
     """State derivatives of the zero terms."""
     dh_dx[:] = 0.0
 
 
-@njit(PARAMETER_JACOBIAN, cache=True)
+@njit(PARAMETER_JACOBIAN, cache=CACHE)
 def no_terms_parameter_jacobian(theta_terms, spec, s, n_states, work, state_out,
                                 state_offset, output_out, output_offset):
     """The zero terms have no parameters."""

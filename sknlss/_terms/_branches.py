@@ -27,7 +27,7 @@ the same file.
 import numpy as np
 from numba import njit
 
-from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
+from .._core._kernels import CACHE, EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
 from .._core._model import RangedTerms, parameter_count
 
 #: Codes of the basis families in the compiled code.
@@ -35,7 +35,7 @@ POWERS, LEGENDRE, CHEBYSHEV = 0, 1, 2
 BASIS_CODES = (POWERS, LEGENDRE, CHEBYSHEV)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def basis_functions(code, degrees, z, out, o_values, o_slopes):
     """Values and derivatives of the basis functions of the given degrees at ``z``.
 
@@ -77,7 +77,7 @@ def basis_functions(code, degrees, z, out, o_values, o_slopes):
         p_prev, p_cur, dp_prev, dp_cur = p_cur, p_next, dp_cur, dp_next
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def evaluate_basis(code, degrees, z):
     """Values and slopes of the basis functions at the points ``z``, as the
     kernels of this module compute them."""
@@ -100,7 +100,7 @@ def evaluate_basis(code, degrees, z):
 _HEADER = 4
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _layout(spec, n_vars):
     """Number of branches and of basis functions, whether the branch inputs
     have biases, and the offsets of b, c and W in the terms' parameters."""
@@ -111,7 +111,7 @@ def _layout(spec, n_vars):
     return rank, n_fun, shifted, o_bias, o_coef, o_w
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _work_layout(rank, n_fun):
     """Offsets in ``work`` of g, g', phi, phi', g'(b), the basis at b, the
     scratch and the ready flag."""
@@ -128,7 +128,7 @@ def _work_size(rank, n_fun, shifted):
     return 4 * rank + 2 * rank * n_fun + (rank * (n_fun + 1) + n_fun + 1 if shifted else 0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _continued_basis(code, degrees, z, lower, upper, work, o_values, o_slopes):
     """The basis functions at ``z``, and their slopes, written to ``work``:
     beyond the range [lower, upper], along their tangents at the nearer end."""
@@ -139,7 +139,7 @@ def _continued_basis(code, degrees, z, lower, upper, work, o_values, o_slopes):
             work[o_values + k] += work[o_slopes + k] * (z - inside)
 
 
-@njit(EVALUATE, cache=True)
+@njit(EVALUATE, cache=CACHE)
 def _evaluate(theta, spec, s, n, h, work):
     n_vars = s.shape[0]
     rank, n_fun, shifted, o_bias, o_coef, o_w = _layout(spec, n_vars)
@@ -180,7 +180,7 @@ def _evaluate(theta, spec, s, n, h, work):
         h[i] = acc
 
 
-@njit(STATE_JACOBIAN, cache=True)
+@njit(STATE_JACOBIAN, cache=CACHE)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
     rank, n_fun, _, _, _, o_w = _layout(spec, s.shape[0])
     o_dg = _work_layout(rank, n_fun)[1]
@@ -192,7 +192,7 @@ def _state_jacobian(theta, spec, s, n, dh_dx, work):
             dh_dx[i, j] = acc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _add_rows(theta, spec, s, work, first_row, out, out_offset):
     """Derivatives of ``h[first_row:first_row + len(out)]`` with respect to V,
     b, c and W added to ``out`` from column ``out_offset``."""
@@ -213,7 +213,7 @@ def _add_rows(theta, spec, s, work, first_row, out, out_offset):
             row[out_offset + o_w + i * rank + l] += work[o_g + l]
 
 
-@njit(PARAMETER_JACOBIAN, cache=True)
+@njit(PARAMETER_JACOBIAN, cache=CACHE)
 def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
                         output_offset):
     _add_rows(theta, spec, s, work, 0, state_out, state_offset)

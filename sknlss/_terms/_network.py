@@ -16,14 +16,14 @@ import math
 import numpy as np
 from numba import njit
 
-from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
+from .._core._kernels import CACHE, EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
 from .._core._model import Terms
 
 #: Activation codes understood by the compiled functions.
 ACTIVATIONS = {"sigmoid": 0, "tanh": 1}
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _part_offsets(base, n_components, n_neurons, n_vars):
     """Offsets of W, b, v, c of a part (state or output networks) and its end."""
     n_hidden = n_components * n_neurons
@@ -33,7 +33,7 @@ def _part_offsets(base, n_components, n_neurons, n_vars):
     return base, o_b, o_v, o_c, o_c + n_components
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _activate(a, activation):
     """Unit output and its derivative for the pre-activation ``a``."""
     if activation == 0:
@@ -44,7 +44,7 @@ def _activate(a, activation):
     return value, 1.0 - value * value
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _evaluate_part(theta, base, n_components, n_neurons, activation, s, work, first_unit,
                    h, first_row):
     n_vars = s.shape[0]
@@ -63,7 +63,7 @@ def _evaluate_part(theta, base, n_components, n_neurons, activation, s, work, fi
         h[first_row + j] = acc_out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _state_jacobian_part(theta, base, n_components, n_neurons, n, n_vars, work,
                          first_unit, dh_dx, first_row):
     o_w, _, o_v, _, _ = _part_offsets(base, n_components, n_neurons, n_vars)
@@ -77,7 +77,7 @@ def _state_jacobian_part(theta, base, n_components, n_neurons, n, n_vars, work,
             dh_dx[first_row + j, i] = acc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _parameter_jacobian_part(theta, base, n_components, n_neurons, s, work, first_unit,
                              out, out_offset):
     n_vars = s.shape[0]
@@ -96,7 +96,7 @@ def _parameter_jacobian_part(theta, base, n_components, n_neurons, s, work, firs
 
 # spec = [n_neurons, activation]; work = [unit outputs, unit slopes] of all
 # (n_states + n_outputs) * n_neurons units.
-@njit(EVALUATE, cache=True)
+@njit(EVALUATE, cache=CACHE)
 def _evaluate(theta, spec, s, n, h, work):
     n_neurons, activation = spec[0], spec[1]
     n_y = h.shape[0] - n
@@ -105,7 +105,7 @@ def _evaluate(theta, spec, s, n, h, work):
     _evaluate_part(theta, end, n_y, n_neurons, activation, s, work, n * n_neurons, h, n)
 
 
-@njit(STATE_JACOBIAN, cache=True)
+@njit(STATE_JACOBIAN, cache=CACHE)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
     n_neurons = spec[0]
     n_y = dh_dx.shape[0] - n
@@ -116,7 +116,7 @@ def _state_jacobian(theta, spec, s, n, dh_dx, work):
                          dh_dx, n)
 
 
-@njit(PARAMETER_JACOBIAN, cache=True)
+@njit(PARAMETER_JACOBIAN, cache=CACHE)
 def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
                         output_offset):
     n_neurons = spec[0]

@@ -19,7 +19,7 @@ from numbers import Integral
 import numpy as np
 from numba import njit
 
-from .._core._kernels import EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
+from .._core._kernels import CACHE, EVALUATE, PARAMETER_JACOBIAN, STATE_JACOBIAN
 from .._core._model import RangedTerms
 
 #: Monomial selections understood by :func:`monomial_exponents`.
@@ -221,14 +221,14 @@ def _monomial_spec(exponents, n_diff):
     return np.concatenate([header, factors.ravel(), *entries]).astype(np.int64)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _work_size(spec):
     """Size of the monomials' work (where the terms' box starts)."""
     n_vars, n_monomials, width, n_diff = spec[0], spec[1], spec[2], spec[4]
     return n_vars * width + n_monomials * (1 + n_diff)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _fill_monomials(spec, s, work):
     """Powers of ``s`` and the monomials, into work."""
     n_vars, n_monomials, width, n_factors = spec[0], spec[1], spec[2], spec[3]
@@ -246,7 +246,7 @@ def _fill_monomials(spec, s, work):
         work[o_values + k] = value
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _fill_derivatives(spec, work):
     """The nonzero derivatives of the monomials, into work (after
     :func:`_fill_monomials`); the others are left as they were."""
@@ -266,7 +266,7 @@ def _max_degree(exponents):
     return max(1, int(exponents.max(initial=0)))
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _batch_values(S, spec, work):
     n_vars, n_monomials, width = spec[0], spec[1], spec[2]
     o_values = n_vars * width
@@ -278,7 +278,7 @@ def _batch_values(S, spec, work):
     return values
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _batch_derivatives(S, spec, work):
     n_vars, n_monomials, width = spec[0], spec[1], spec[2]
     o_out = n_vars * width + n_monomials
@@ -352,7 +352,7 @@ def monomial_jacobian(S, exponents):
 _TAIL = 6
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _offsets(spec):
     """n_zeta, n_eta, the offsets in spec of the zeta and eta positions and of
     their tables of monomials by state, and the offsets in work of the
@@ -386,7 +386,7 @@ def _containing(exponents, n_states):
 # telling the state Jacobian whether the point of the last evaluation was
 # outside; an unbounded box leaves every point inside, where nothing else
 # changes.
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _inside(s, work, o_box):
     n_vars = s.shape[0]
     for j in range(n_vars):
@@ -395,14 +395,14 @@ def _inside(s, work, o_box):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _factor(spec, width, row, f):
     """Variable and exponent of factor ``f`` of the monomial at ``row``."""
     j = spec[row + 1 + f] // width
     return j, spec[row + 1 + f] - j * width
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _fill_clipped_monomials(spec, s, work, o_box):
     """The monomials at the nearest point of the box, into work."""
     n_vars = spec[0]
@@ -412,7 +412,7 @@ def _fill_clipped_monomials(spec, s, work, o_box):
     _fill_monomials(spec, work[o_point : o_point + n_vars], work)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _add_tangent_steps(spec, s, work, o_box):
     """Continue the monomials of :func:`_fill_clipped_monomials` from the
     box's point to ``s`` along their tangent planes."""
@@ -433,7 +433,7 @@ def _add_tangent_steps(spec, s, work, o_box):
                 work[o_values + k] += slope * step
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _zero_clipped_slopes(spec, s, work, o_box):
     """Zero the state derivatives of the held monomials along the clipped
     states."""
@@ -446,7 +446,7 @@ def _zero_clipped_slopes(spec, s, work, o_box):
                 work[o_out + k * n_diff + i] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _add_tangent_curvature(spec, s, work, o_box):
     """Add to the state derivatives of the continued monomials (computed at
     the box's point) the change of the tangent plane with the unclipped
@@ -476,7 +476,7 @@ def _add_tangent_curvature(spec, s, work, o_box):
             work[o_out + k * n_diff + i] += acc
 
 
-@njit(EVALUATE, cache=True)
+@njit(EVALUATE, cache=CACHE)
 def _evaluate(theta, spec, s, n, h, work):
     n_zeta, n_eta, o_zeta, o_eta, _, _, o_values, _ = _offsets(spec)
     # Filled at s before the box is looked at, so that the path of the points
@@ -503,7 +503,7 @@ def _evaluate(theta, spec, s, n, h, work):
         h[n + i] = acc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _sparse_rows(theta, o_theta, n_columns, spec, o_positions, o_bounds, n, work, o_slopes,
                  dh_dx, first_row, n_rows):
     """Rows ``first_row:first_row + n_rows`` of dh/dx for the coefficients
@@ -521,7 +521,7 @@ def _sparse_rows(theta, o_theta, n_columns, spec, o_positions, o_bounds, n, work
             dh_dx[first_row + r, j] = acc
 
 
-@njit(STATE_JACOBIAN, cache=True)
+@njit(STATE_JACOBIAN, cache=CACHE)
 def _state_jacobian(theta, spec, s, n, dh_dx, work):
     n_zeta, n_eta, o_zeta, o_eta, o_zeta_bounds, o_eta_bounds, _, o_slopes = _offsets(spec)
     _fill_derivatives(spec, work)
@@ -536,7 +536,7 @@ def _state_jacobian(theta, spec, s, n, dh_dx, work):
                  dh_dx, n, dh_dx.shape[0] - n)
 
 
-@njit(PARAMETER_JACOBIAN, cache=True)
+@njit(PARAMETER_JACOBIAN, cache=CACHE)
 def _parameter_jacobian(theta, spec, s, n, work, state_out, state_offset, output_out,
                         output_offset):
     n_zeta, n_eta, o_zeta, o_eta, _, _, o_values, _ = _offsets(spec)

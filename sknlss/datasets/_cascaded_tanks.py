@@ -9,6 +9,7 @@ from scipy.io import loadmat
 from sklearn.utils import Bunch, check_random_state
 from sklearn.utils._param_validation import Interval, validate_params
 
+from .._core._kernels import CACHE
 from .._validation import Integers, naming
 from ..signals import multisine
 from ._fetch import RemoteDataset, fetch_file
@@ -226,14 +227,14 @@ def load_cascaded_tanks(data_home=None, *, download=True):
     return fetch_cascaded_tanks(data_home, download_if_missing=download)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _tank_slopes(x1, x2, inflow, disturbance, k1, k2, k3):
     q1 = np.sqrt(max(x1, 0.0))
     q2 = np.sqrt(max(x2, 0.0))
     return inflow - k1 * q1, k2 * q1 - k3 * q2 + disturbance
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _simulate_tanks(u, x0, k, sampling_time, n_substeps, overflow, process, split):
     """Integrate the tanks over zero-order-held inputs with RK4 sub-steps.
 

@@ -7,6 +7,7 @@ from numba import njit
 from sklearn.utils import Bunch, check_random_state
 from sklearn.utils._param_validation import Interval, validate_params
 
+from .._core._kernels import CACHE
 from ._synthetic import (AT_LEAST_ONE, INIT_WINDOW, POSITIVE, RECORD_CONSTRAINTS,
                          band_fraction, gaussian_noise, ramp)
 
@@ -84,7 +85,7 @@ The first init_window = 50 test samples may be used to set the initial state.
 """
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _acceleration(v, force, plant):
     mass, viscous, coulomb, static, stribeck, smoothing = (
         plant[0], plant[1], plant[2], plant[3], plant[4], plant[5])
@@ -93,7 +94,7 @@ def _acceleration(v, force, plant):
     return (force - friction) / mass
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _simulate_loop(reference, noise, plant, gains, sampling_time, n_substeps):
     """Measured positions and controller forces of the closed loop.
 

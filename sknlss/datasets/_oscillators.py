@@ -14,6 +14,7 @@ from numba import njit
 from sklearn.utils import Bunch, check_random_state
 from sklearn.utils._param_validation import validate_params
 
+from .._core._kernels import CACHE
 from ._synthetic import (AT_LEAST_ONE, INIT_WINDOW, POSITIVE, PRE_ROLL, RECORD_CONSTRAINTS,
                          band_fraction, gaussian_noise, measure, ramp, random_multisine)
 
@@ -27,7 +28,7 @@ _GENERATOR_CONSTRAINTS = {
 }
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _slopes(y, v, z, u, p):
     abs_z = abs(z)
     accel = (u - p[_D] * v - p[_K] * y - p[_K3] * y**3 - z) / p[_M]
@@ -36,7 +37,7 @@ def _slopes(y, v, z, u, p):
     return v, accel, dz
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _simulate_oscillator(u, params, sampling_time, n_substeps):
     """Displacement at the sampling instants, from rest, input held over each sample.
 
