@@ -181,10 +181,12 @@ def fit_percent(y_true, y_pred, *, n_transient=0, sequence_id=None,
     >>> fit_percent([1.0, -1.0, 1.0, -1.0], [1.0, -1.0, 1.0, -1.0])
     100.0
     """
-    return 100.0 * (
-        1.0 - nrmse(y_true, y_pred, n_transient=n_transient, sequence_id=sequence_id,
-                    multioutput=multioutput)
-    )
+    error = nrmse(y_true, y_pred, n_transient=n_transient, sequence_id=sequence_id,
+                  multioutput=multioutput)
+    # An error near the floating-point limit is a fit of -inf, without an
+    # overflow warning.
+    with np.errstate(over="ignore"):
+        return 100.0 * (1.0 - error)
 
 
 _METRICS = {
@@ -217,8 +219,8 @@ class _SimulationScorer(_MetadataRequester):
         else:
             y_pred = estimator.predict(X, sequence_id=sequence_id)
         sign = 1.0 if greater_is_better else -1.0
-        if not np.all(np.isfinite(y_pred)):
-            return -np.inf
+        # A diverged simulation gets the metric's infinite error, unless its
+        # non-finite values lie in the transient the metric skips.
         value = function(
             y_true, y_pred, n_transient=self.n_transient, sequence_id=sequence_id
         )

@@ -530,6 +530,9 @@ def plot_error_spectrum(y_true, y_pred, *, noise_level=None, sampling_time=None,
     freq, xlabel = _frequency_axis(np.fft.rfftfreq(n_samples)[1:], sampling_time)
     level = None
     if noise_level is not None:
+        if np.asarray(noise_level).dtype == bool:
+            raise ValueError(f"noise_level must be a float or an array of floats, got "
+                             f"{noise_level!r}.")
         level = np.asarray(noise_level, dtype=float)
         if level.shape not in ((), freq.shape):
             raise ValueError(

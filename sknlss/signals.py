@@ -147,7 +147,8 @@ def multisine(n_samples_per_period, *, n_periods=1, n_realizations=1, lines="odd
         odd lines; ``"special_odd"``: the lines ``8m+1`` and ``8m+3``;
         ``"random_odd"``: the odd lines, less one line chosen at random in each
         consecutive group of ``group_size`` odd lines (the detection lines of
-        odd nonlinear distortion). An explicit, strictly increasing integer
+        odd nonlinear distortion; a last, incomplete group keeps all its
+        lines). An explicit, strictly increasing integer
         array is used as is and ``band`` is then ignored. DC and the Nyquist line are never
         excited.
     band : tuple of float, default=(0.0, 0.45)
@@ -172,7 +173,8 @@ def multisine(n_samples_per_period, *, n_periods=1, n_realizations=1, lines="odd
         ``np.repeat(np.arange(n_realizations), u.shape[1])`` as its
         ``sequence_id``).
     lines : ndarray of shape (n_lines,)
-        The excited DFT lines, in increasing order.
+        The DFT lines selected or given, in increasing order (a line given a
+        zero amplitude stays in it, without being excited).
 
     See Also
     --------

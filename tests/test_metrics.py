@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.base import BaseEstimator, RegressorMixin
@@ -88,8 +90,21 @@ def test_transient_scorer():
 def test_transient_scorer_divergent_model_scores_worst():
     X = np.arange(10.0).reshape(-1, 1)
     model = _Shift(np.nan)
-    assert make_transient_scorer("rms")(model, X, X[:, 0]) == -np.inf
-    assert make_transient_scorer("fit")(model, X, X[:, 0]) == -np.inf
+    for metric in ("rms", "nrmse", "fit"):
+        assert make_transient_scorer(metric)(model, X, X[:, 0]) == -np.inf
+    # Non-finite values only in the skipped transient are skipped with it.
+    X_late = X.copy()
+    X_late[:2] = np.nan
+    assert make_transient_scorer("rms", n_transient=3)(_Shift(1.0), X_late, X[:, 0]) == (
+        pytest.approx(-1.0))
+
+
+def test_fit_percent_of_a_huge_finite_error_is_minus_inf_without_a_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for multioutput in ("uniform_average", "raw_values"):
+            assert fit_percent([1.0, -1.0, 1.0], [1e307, -1e307, 1e307],
+                               multioutput=multioutput) == -np.inf
 
 
 def test_transient_scorer_bad_arguments():

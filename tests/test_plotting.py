@@ -322,6 +322,8 @@ def test_plot_error_spectrum_array_level_and_errors():
         plot_error_spectrum(y, y, noise_level=np.ones(5))
     with pytest.raises(ValueError, match="noise_level must be positive"):
         plot_error_spectrum(y, y, noise_level=0.0)
+    with pytest.raises(ValueError, match="noise_level must be a float or an array of floats"):
+        plot_error_spectrum(y, y, noise_level=True)
     with pytest.raises(ValueError, match=r"y_pred has 64 non-finite"):
         plot_error_spectrum(y, np.full(64, np.nan))
     with pytest.raises(ValueError, match="at least 2 samples"):

@@ -6,6 +6,7 @@ file it finds and, when no folder holds one, downloads the official archive
 into the user cache folder and extracts the data file from it.
 """
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -112,23 +113,32 @@ def _download(dataset, destination):
     behind. Raises OSError (network errors are OSErrors), ValueError (a hash
     that does not match) or zipfile.BadZipFile.
     """
+    # The folders this call creates, the deepest first: removed again on failure.
+    created = [folder for folder in (destination.parent, *destination.parent.parents)
+               if not folder.exists()]
     destination.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=destination.parent) as tmp:
-        known_hash = (None if dataset.archive_sha256 is None
-                      else f"sha256:{dataset.archive_sha256}")
-        archive = pooch.retrieve(
-            dataset.archive_url, known_hash=known_hash, fname=dataset.archive_name,
-            path=tmp, downloader=_downloader(),
-        )
-        with zipfile.ZipFile(archive) as zipped:
-            if dataset.member not in zipped.namelist():
-                raise OSError(
-                    f"the archive downloaded from {dataset.archive_url} has no "
-                    f"member {dataset.member}"
-                )
-            extracted = Path(zipped.extract(dataset.member, Path(tmp) / "extracted"))
-        check_sha256(dataset, extracted)
-        shutil.move(extracted, destination)
+    try:
+        with tempfile.TemporaryDirectory(dir=destination.parent) as tmp:
+            known_hash = (None if dataset.archive_sha256 is None
+                          else f"sha256:{dataset.archive_sha256}")
+            archive = pooch.retrieve(
+                dataset.archive_url, known_hash=known_hash, fname=dataset.archive_name,
+                path=tmp, downloader=_downloader(),
+            )
+            with zipfile.ZipFile(archive) as zipped:
+                if dataset.member not in zipped.namelist():
+                    raise OSError(
+                        f"the archive downloaded from {dataset.archive_url} has no "
+                        f"member {dataset.member}"
+                    )
+                extracted = Path(zipped.extract(dataset.member, Path(tmp) / "extracted"))
+            check_sha256(dataset, extracted)
+            shutil.move(extracted, destination)
+    except BaseException:
+        for folder in created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
 
 
 def _not_found_message(dataset, folders, reason):
