@@ -107,7 +107,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Degree d of the branches (>= 2); ``None`` uses the largest monomial
         degree of the PNLSS model.
     n_sampling_points : int, default=500
-        Number of points in which the Jacobians are evaluated.
+        Number of points in which the Jacobians are evaluated (with
+        ``sampling="trajectory"``, at most the number of fitted rows).
     sampling : {"normal", "trajectory"}, default="normal"
         Where the Jacobians are evaluated: normally distributed points (as in
         the paper) with the mean and covariance of the PNLSS model's own
@@ -275,8 +276,8 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
         Degree of the branches used.
     decoupling_error_ : float
         Relative error of the decoupled Jacobian tensor in the sampling points
-        (of the kept start); not set when the record is too short for the
-        branches and the linear model is kept without any start.
+        (of the kept start); not set when the linear model is kept
+        (``fell_back_to_linear_``), there being no kept start.
     n_params_ : int
         Number of parameters: ``n^2 + n n_u + n_y n + n_y n_u`` (linear part)
         ``+ (n + n_u) r + (n + n_y) r`` (V, W) ``+ (d - 1) r`` (branches)
