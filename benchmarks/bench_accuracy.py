@@ -201,10 +201,10 @@ def _read_runs(path):
         return {(r["benchmark"], r["model"], r["seed"]): r for r in map(json.loads, handle)}
 
 
-def _compare(first, second):
-    """Medians of two runs over the fits they share, with their relative change,
-    and the largest relative change of a single fit."""
-    a, b = _read_runs(first), _read_runs(second)
+def _compare(a, b):
+    """Medians of two runs (their fits as :func:`_read_runs` gives them) over the
+    fits they share, with their relative change, and the largest relative
+    change of a single fit."""
     shared = sorted(a.keys() & b.keys())
     rows = []
     for benchmark, model in dict.fromkeys(key[:2] for key in shared):
@@ -223,17 +223,37 @@ def _compare(first, second):
     return rows
 
 
+def _seed(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a random state is a non-negative integer, "
+                                         f"got {text!r}")
+    return value
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--benchmarks", nargs="+",
-                        default=["cascaded_tanks", "silverbox", *SIMULATED])
-    parser.add_argument("--random-states", type=int, nargs="+", default=list(range(10)))
-    parser.add_argument("--models", nargs="+", default=None)
-    parser.add_argument("--data-home", default=None)
-    parser.add_argument("--n-jobs", type=int, default=2)
+    benchmarks = ["cascaded_tanks", "silverbox", *SIMULATED]
+    labels = list(_models(1, tanks=True))
+    parser.add_argument("--benchmarks", nargs="+", choices=benchmarks, default=benchmarks,
+                        metavar="NAME", help=f"from {benchmarks} (default: all)")
+    parser.add_argument("--random-states", type=_seed, nargs="+", default=list(range(10)),
+                        metavar="SEED", help="random states of the fits (default: 0 to 9)")
+    parser.add_argument("--models", nargs="+", choices=labels, default=None, metavar="LABEL",
+                        help=f"from {labels} (default: all; on the Cascaded Tanks, PNLSS "
+                             "and decoupled PNLSS estimate the initial state)")
+    parser.add_argument("--data-home", default=None,
+                        help="folder holding the measured data (default: $SKNLSS_DATA, then "
+                             "the user cache folder)")
+    parser.add_argument("--n-jobs", type=int, default=2, help="fits run at once")
     parser.add_argument("--output", default=None,
-                        help="folder for bench_accuracy_threads<N>.csv/.md and the raw "
-                             "runs (JSON lines, written as the fits finish)")
+                        help="folder for bench_accuracy_threads<SETTING>.csv/.md and the raw "
+                             "runs (JSON lines, written as the fits finish); SETTING is "
+                             "OPENBLAS_NUM_THREADS ('unset' when it is), followed by "
+                             "OPENBLAS_CORETYPE when that is set")
     parser.add_argument("--redraw", action="store_true",
                         help="fit each random state of a simulated system on its own "
                              "draw of the records (random_state of the data = that of "
@@ -246,12 +266,24 @@ def main():
                         help="instead of fitting, summarise a runs file (e.g. of an "
                              "interrupted run) into the tables")
     args = parser.parse_args()
+    try:
+        if args.output:
+            Path(args.output).mkdir(parents=True, exist_ok=True)
+        runs_files = [args.summarize] if args.summarize else args.compare or []
+        read = [_read_runs(path) for path in runs_files]
+    except OSError as error:
+        parser.error(f"{error.filename}: {error.strerror or error}")
     if args.summarize:
-        _write_tables(_read_runs(args.summarize).values(), args.data_home,
+        if not read[0]:
+            parser.error(f"--summarize: {args.summarize} holds no fit")
+        _write_tables(read[0].values(), args.data_home,
                       Path(args.summarize).name.removesuffix("_runs.jsonl"), args.output)
         return
     if args.compare:
-        rows = _compare(*args.compare)
+        rows = _compare(*read)
+        if not rows:
+            parser.error("--compare: the two runs files share no fit")
+        print("  ".join(rows[0]))
         for row in rows:
             print("  ".join(f"{v:.4g}" if isinstance(v, float) else str(v)
                             for v in row.values()))

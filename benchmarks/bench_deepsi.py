@@ -44,8 +44,8 @@ from pathlib import Path
 import numpy as np
 from joblib import Parallel, delayed
 
-from bench_accuracy import _models
-from bench_peers import _publish, _row
+from bench_accuracy import _models, _seed
+from bench_peers import _check_peer, _publish, _row
 
 from sknlss.datasets import fetch_cascaded_tanks, fetch_silverbox
 from sknlss.metrics import rms_error
@@ -159,10 +159,11 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=SETTINGS["n_its"],
                         help="Adam iterations of every deepSI fit (the README's 10,000 by "
                              "default)")
-    parser.add_argument("--random-states", type=int, nargs="+", default=RANDOM_STATES)
+    parser.add_argument("--random-states", type=_seed, nargs="+", default=RANDOM_STATES)
     parser.add_argument("--output", type=Path, metavar="FILE",
                         help="also write the printed table to FILE")
     args = parser.parse_args(argv)
+    _check_peer(parser, args, "deepSI")
     _publish(_table(args.runs, args.benchmarks, args.iterations, args.random_states),
              args.output, ("deepSI", "torch"))
 

@@ -128,6 +128,19 @@ def _versions(*packages):
     return f"Peer versions: {peers}\n"
 
 
+def _check_peer(parser, args, package):
+    """Refuse ``--output`` without the peer's package: the file would replace
+    a published table with one that lacks its side-by-side rows. Without
+    ``--output``, the sknlss rows are printed and the peer said missing."""
+    if args.output is None:
+        return
+    try:
+        version(package)
+    except PackageNotFoundError:
+        parser.error(f"--output {args.output} needs {package} (pip install {package}): "
+                     "without it the table would have no side-by-side rows.")
+
+
 def _publish(lines, output, peers):
     """Print the table's lines as they come; with ``output``, also write them to
     that file, headed by the machine and the versions of the ``peers``."""
@@ -206,6 +219,7 @@ def main(argv=None):
     parser.add_argument("--output", type=Path, metavar="FILE",
                         help="also write the printed table to FILE")
     args = parser.parse_args(argv)
+    _check_peer(parser, args, "freq-statespace")
     _publish(_table(fetch_silverbox(download_if_missing=False)), args.output,
              ("freq-statespace", "jax"))
 

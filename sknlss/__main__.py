@@ -6,9 +6,8 @@ the command does.
 
 import argparse
 import sys
-from pathlib import Path
 
-from .benchmarks import BENCHMARKS, reproduce
+from .benchmarks import BENCHMARKS, _prepare_output, reproduce
 
 _DESCRIPTION = (
     "Fit every model on the estimation record of each benchmark only, with the "
@@ -17,15 +16,22 @@ _DESCRIPTION = (
 )
 
 
+def _integer(text, rule):
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{rule}, got {text!r}") from None
+
+
 def _seed(text):
-    value = int(text)
+    value = _integer(text, "a random state is a non-negative integer")
     if value < 0:
         raise argparse.ArgumentTypeError(f"a random state is a non-negative integer, got {value}")
     return value
 
 
 def _n_jobs(text):
-    value = int(text)
+    value = _integer(text, "the number of fits at once is an integer")
     if value == 0:
         raise argparse.ArgumentTypeError("0 fits at once: use a positive number, or -1 for "
                                          "one per core")
@@ -68,9 +74,9 @@ def main(argv=None):
     args = parser.parse_args(argv)
     benchmarks = sorted(BENCHMARKS) if args.benchmark == "all" else [args.benchmark]
     try:
-        # Before the fits, which take minutes: a path that cannot be a folder
-        # fails now.
-        Path(args.output).mkdir(parents=True, exist_ok=True)
+        # Before the fits, which take minutes: a path where files cannot be
+        # written fails now.
+        _prepare_output(args.output)
     except OSError as error:
         command.error(f"--output {args.output}: {error.strerror or error}")
     reproduce(benchmarks, data_home=args.data_home, output=args.output,

@@ -29,6 +29,7 @@ import math
 import numbers
 import os
 import sys
+import tempfile
 import time
 import warnings
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils._param_validation import HasMethods, validate_params
 from sklearn.utils.parallel import Parallel, delayed
 
-from ._validation import POSITIVE_FINITE
+from ._validation import POSITIVE_FINITE, Integers
 from .datasets import fetch_cascaded_tanks, fetch_silverbox, make_cascaded_tanks, make_duffing
 from .exceptions import DataWarning, SimulationDivergedWarning
 from .metrics import rms_error
@@ -148,6 +149,8 @@ def _benchmark(name, argument):
 
 
 _OUT = [HasMethods(["write"]), None]
+#: joblib's n_jobs: a number of workers, or -1 (one per core) and below; 0 means nothing.
+_N_JOBS = [Integers(1, None, closed="left"), Integers(None, -1, closed="right"), None]
 
 
 @validate_params(
@@ -244,14 +247,35 @@ def _fit_and_score(factory, seed, data, records, scale):
                                    for w in caught)}
 
 
-def _check_evaluation(data, records, random_states):
+def _check_random_states(random_states):
+    """A ValueError naming ``random_states`` unless it holds non-negative integers."""
+    if len(random_states) == 0:
+        raise ValueError("random_states must hold at least one random state.")
+    for seed in random_states:
+        if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) or (
+                seed < 0):
+            raise ValueError(f"random_states must hold non-negative integers, got {seed!r}.")
+
+
+def _prepare_output(output):
+    """Create the folder ``output`` and check that files can be written there:
+    before the fits, which take minutes (OSError otherwise)."""
+    Path(output).mkdir(parents=True, exist_ok=True)
+    tempfile.TemporaryFile(dir=output).close()
+
+
+def _check_evaluation(data, models, records, random_states):
     """ValueErrors that name the argument of :func:`evaluate` that cannot be used."""
     missing = [key for key in ("X_est", "y_est") if key not in data]
     if missing:
         raise ValueError(f"data must hold the estimation record X_est, y_est; it lacks "
                          f"{', '.join(missing)}.")
-    if len(random_states) == 0:
-        raise ValueError("random_states must hold at least one random state.")
+    _check_random_states(random_states)
+    for label_and_factory in models:
+        if not (isinstance(label_and_factory, tuple) and len(label_and_factory) == 2
+                and callable(label_and_factory[1])):
+            raise ValueError("models must hold (label, factory) pairs, factory(random_state) "
+                             f"returning an estimator; got {label_and_factory!r}.")
     for name, record in records.items():
         if not (isinstance(record, tuple) and len(record) == 3):
             raise ValueError(f"records[{name!r}] must be a tuple (X, y, n_skip).")
@@ -265,7 +289,7 @@ def _check_evaluation(data, records, random_states):
 
 @validate_params(
     {"data": [HasMethods(["keys"])], "models": [list], "records": [dict],
-     "random_states": ["array-like"], "scale": [POSITIVE_FINITE], "n_jobs": [int, None],
+     "random_states": ["array-like"], "scale": [POSITIVE_FINITE], "n_jobs": _N_JOBS,
      "out": _OUT},
     prefer_skip_nested_validation=True,
 )
@@ -303,7 +327,7 @@ def evaluate(data, models, records, *, random_states=(0, 1, 2), scale=1.0, n_job
     fitted : dict
         The fitted model of the first random state, by label.
     """
-    _check_evaluation(data, records, random_states)
+    _check_evaluation(data, models, records, random_states)
     # Every (model, random state) pair is one job: the slow models do not
     # leave workers idle while the fast ones wait for their turn.
     jobs = [(label, factory, seed) for label, factory in models for seed in random_states]
@@ -372,7 +396,7 @@ def format_table(rows, records, unit):
 @validate_params(
     {"benchmarks": ["array-like"], "data_home": [str, os.PathLike, None],
      "output": [str, os.PathLike, None], "download_if_missing": ["boolean"],
-     "random_states": ["array-like"], "n_jobs": [int, None], "out": _OUT},
+     "random_states": ["array-like"], "n_jobs": _N_JOBS, "out": _OUT},
     prefer_skip_nested_validation=True,
 )
 def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, output=None,
@@ -387,9 +411,10 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
         First folder searched for the data.
     output : str or path-like, default=None
         Folder where each benchmark's table (CSV) and figures (PNG, with
-        matplotlib) are written; nothing is written when None. It is created
-        before any fit, so that a path that cannot be a folder fails at once
-        (``OSError``).
+        matplotlib) are written, named after the benchmark (``<name>.csv``,
+        ``<name>_simulated.csv`` for a simulated stand-in); nothing is written
+        when None. It is created and checked for writing before any fit, so
+        that a path where files cannot be written fails at once (``OSError``).
     download_if_missing : bool, default=True
         Whether to download the data when they are absent.
     random_states : sequence of int, default=(0, 1, 2)
@@ -409,8 +434,9 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
     out = sys.stdout if out is None else out
     for name in benchmarks:
         _benchmark(name, "benchmarks")
+    _check_random_states(random_states)
     if output is not None:
-        Path(output).mkdir(parents=True, exist_ok=True)
+        _prepare_output(output)
     tables = {}
     for name in benchmarks:
         benchmark = BENCHMARKS[name]
@@ -426,5 +452,7 @@ def reproduce(benchmarks=("cascaded_tanks", "silverbox"), *, data_home=None, out
         print("\n" + format_table(rows, records, benchmark.unit) + "\n", file=out, flush=True)
         tables[name] = rows
         if output is not None:
-            write_results(name, benchmark, data, rows, fitted, output, out)
+            # Files of a simulated stand-in say so in their names.
+            stem = f"{name}_simulated" if source == "simulated" else name
+            write_results(stem, benchmark, data, rows, fitted, output, out)
     return tables

@@ -75,7 +75,7 @@ def test_a_diverging_model_is_listed_not_drawn_and_does_not_warn(monkeypatch, tm
     assert "Not drawn (diverged): BLA 1" in out.getvalue()
 
 
-def test_missing_data_fall_back_to_simulated(monkeypatch):
+def test_missing_data_fall_back_to_simulated(monkeypatch, tmp_path):
     def missing(home, download_if_missing):
         raise FileNotFoundError("no data here")
 
@@ -87,6 +87,10 @@ def test_missing_data_fall_back_to_simulated(monkeypatch):
     assert source == "simulated"
     assert "FALLING BACK TO SIMULATED DATA" in out.getvalue()
     assert data.X_est.shape[1] == 1
+    # Its files say so too, and cannot pass for the benchmark's results.
+    reproduce(["tiny"], output=tmp_path, random_states=(0,), out=io.StringIO())
+    assert {path.name for path in tmp_path.iterdir()} >= {"tiny_simulated.csv"}
+    assert all(path.name.startswith("tiny_simulated") for path in tmp_path.iterdir())
 
 
 def test_measured_source_names_the_file_only(monkeypatch):
@@ -105,7 +109,26 @@ def test_reproduce_refuses_an_output_path_before_any_fit(monkeypatch, tmp_path):
     out = io.StringIO()
     with pytest.raises(OSError):
         reproduce(["tiny"], output=a_file, random_states=(0,), out=out)
+    # A folder where no file can be written (a directory of /proc, which even
+    # the superuser cannot write to).
+    with pytest.raises(OSError):
+        reproduce(["tiny"], output="/proc/self", random_states=(0,), out=out)
     assert out.getvalue() == ""
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (dict(random_states=(0, -1)), "random_states must hold non-negative integers, got -1"),
+    (dict(random_states=("a",)), "random_states must hold non-negative integers, got 'a'"),
+    (dict(random_states=(True,)), "random_states must hold non-negative integers, got True"),
+    (dict(n_jobs=0), "The 'n_jobs' parameter of reproduce"),
+])
+def test_reproduce_refuses_its_arguments_before_loading_any_data(monkeypatch, arguments,
+                                                                  message):
+    benchmark = _tiny_benchmark()
+    benchmark.fetch = lambda home, download_if_missing: pytest.fail("data loaded")
+    monkeypatch.setitem(BENCHMARKS, "tiny", benchmark)
+    with pytest.raises(ValueError, match=message):
+        reproduce(["tiny"], out=io.StringIO(), **arguments)
 
 
 def test_command_line(monkeypatch, tmp_path, capsys):
@@ -125,8 +148,11 @@ def test_command_line(monkeypatch, tmp_path, capsys):
     # Usage errors, before any fit.
     (tmp_path / "a_file").write_text("")
     for arguments, message in [(["--output", "a_file"], "--output a_file"),
+                               (["--output", "/proc/self"], "--output /proc/self"),
                                (["--random-states", "-1"], "non-negative"),
-                               (["--n-jobs", "0"], "0 fits at once")]:
+                               (["--random-states", "abc"], "non-negative integer, got 'abc'"),
+                               (["--n-jobs", "0"], "0 fits at once"),
+                               (["--n-jobs", "x"], "is an integer, got 'x'")]:
         capsys.readouterr()
         with pytest.raises(SystemExit):
             main(["reproduce", *arguments])
@@ -164,12 +190,19 @@ def test_evaluate_counts_fits_stopped_while_improving():
     (None, {"test": (None, np.zeros(20), 2.5)}, (0,), "n_skip must be an integer"),
     (None, {"test": (None, np.zeros(20), 20)}, (0,), "n_skip must be an integer"),
     (None, {"test": (None, np.zeros(20))}, (0,), r"must be a tuple \(X, y, n_skip\)"),
+    (None, {}, (0, -2), "random_states must hold non-negative integers"),
 ])
 def test_evaluate_names_the_argument_it_cannot_use(data, records, random_states, message):
     data = make_cascaded_tanks(n_samples=64, random_state=0) if data is None else data
     with pytest.raises(ValueError, match=message):
         evaluate(data, [("BLA", lambda seed: BLAEstimator(n_states=1))], records,
                  random_states=random_states)
+
+
+def test_evaluate_names_models_that_are_not_pairs():
+    data = make_cascaded_tanks(n_samples=64, random_state=0)
+    with pytest.raises(ValueError, match=r"models must hold \(label, factory\) pairs.*'BLA'"):
+        evaluate(data, ["BLA"], {}, random_states=(0,))
 
 
 def test_evaluate_takes_a_plain_dict_and_a_holdout_search():
