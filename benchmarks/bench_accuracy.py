@@ -50,6 +50,7 @@ from sknlss import (
     PNLSSRegressor,
 )
 from sknlss import datasets as sd
+from sknlss.__main__ import _seed
 from sknlss.benchmarks import _fit_and_score
 
 #: Number of states of each simulated system's models (for the drive, whose
@@ -223,17 +224,6 @@ def _compare(a, b):
     return rows
 
 
-def _seed(text):
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"a random state is a non-negative integer, "
-                                         f"got {text!r}")
-    return value
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     benchmarks = ["cascaded_tanks", "silverbox", *SIMULATED]
@@ -273,6 +263,8 @@ def main():
         read = [_read_runs(path) for path in runs_files]
     except OSError as error:
         parser.error(f"{error.filename}: {error.strerror or error}")
+    except (ValueError, KeyError) as error:
+        parser.error(f"{' or '.join(runs_files)}: not a runs file of this script ({error!r})")
     if args.summarize:
         if not read[0]:
             parser.error(f"--summarize: {args.summarize} holds no fit")
@@ -300,6 +292,8 @@ def main():
             for label, factory in models.items()
             if args.models is None or label in args.models
             for seed in args.random_states]
+    if not jobs:
+        parser.error(f"--models {args.models} are not run on --benchmarks {args.benchmarks}")
     output = Path(args.output) if args.output else None
     stem = f"bench_accuracy_threads{setting}"
     runs = []

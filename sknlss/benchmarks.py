@@ -149,7 +149,7 @@ def _benchmark(name, argument):
 
 
 _OUT = [HasMethods(["write"]), None]
-#: joblib's n_jobs: a number of workers, or -1 (one per core) and below; 0 means nothing.
+#: joblib's n_jobs: a number of workers, or -1 (one per core) and below; joblib refuses 0.
 _N_JOBS = [Integers(1, None, closed="left"), Integers(None, -1, closed="right"), None]
 
 

@@ -18,7 +18,7 @@ from sklearn.utils import get_tags
 from sklearn.utils._param_validation import HasMethods
 from sklearn.utils.validation import check_is_fitted
 
-from ._core._multistart import run_starts
+from ._core._multistart import recorded_warnings, run_starts
 from ._core._sequences import holdout_masks, sequence_bounds
 from ._estimators._base import _unfitted_on_error
 from ._validation import ANY_INTEGER, binary_magnitude, naming
@@ -30,10 +30,9 @@ __all__ = ["HoldoutSearch"]
 def _fit_candidate(estimator, params, X, y, sequence_id):
     """A fitted candidate and the warnings of its fit, as ``(message,
     category)`` pairs: those of a joblib worker would not reach the caller."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with recorded_warnings() as caught:
         model = clone(estimator).set_params(**params).fit(X, y, sequence_id=sequence_id)
-    return model, [(warning.message, warning.category) for warning in caught]
+    return model, caught
 
 
 def _fitted_states(model):

@@ -380,6 +380,22 @@ def test_validation_loss_reuses_only_the_same_iterate(jacobian):
     assert fresh_loss(theta) != fresh_loss(other)
 
 
+def test_a_start_with_its_own_decay_scale_reuses_its_own_simulations(monkeypatch):
+    # Each start fits a copy of the shared problem (its own weight-decay
+    # scale): the copy's held-out loss is served by the copy's last residual.
+    problem, theta, U, Y, starts = _held_out_problem()
+    problem.weight_decay = 1.0
+    start = problem.with_decay_scale(theta)
+    assert start is not problem and problem.decay_scale is None
+    simulated = []
+    monkeypatch.setattr(start.model, "simulate",
+                        lambda *args: simulated.append(1) or StateSpaceModel.simulate(
+                            start.model, *args))
+    start.residual(theta, False)
+    start.validation_loss(theta)
+    assert len(simulated) == 1
+
+
 def test_held_out_loss_needs_the_cost_rows_fitted_within_the_limit():
     problem, theta, U, Y, starts = _held_out_problem()
     model = problem.model

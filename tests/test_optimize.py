@@ -1,11 +1,14 @@
+import threading
 import warnings
 
 import numpy as np
 import pytest
 from sklearn.exceptions import ConvergenceWarning
+from threadpoolctl import threadpool_info, threadpool_limits
 
 from sknlss import DecoupledPNLSS, NLSS2Regressor, PNLSSRegressor
-from sknlss._core._optimize import _damped_step, _scaled_step_factors, levenberg_marquardt
+from sknlss._core._optimize import (_damped_step, _scaled_step_factors, levenberg_marquardt,
+                                    one_blas_thread)
 
 
 def _rosenbrock(theta, jacobian):
@@ -135,3 +138,48 @@ def test_estimators_stop_early(estimator):
     history = estimator.validation_loss_history_
     assert estimator.n_iter_ < 200
     assert estimator.n_iter_ == int(np.argmin(history)) + 2
+
+
+def _blas_threads():
+    return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+
+def test_one_blas_thread_in_overlapping_threads():
+    # Starts run in threads: the first to enter leaves first and lives on (a
+    # pool worker); the limit holds while any start runs, in whichever thread,
+    # and the last to leave restores the limits found by the first.
+    seen = {}
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+
+    def first():
+        with one_blas_thread():
+            seen["first"] = _blas_threads()
+            first_in.set()
+            second_in.wait()
+        first_out.set()
+        second_done.wait()
+
+    def second():
+        first_in.wait()
+        with one_blas_thread():
+            second_in.set()
+            first_out.wait()
+            seen["second, after the first left"] = _blas_threads()
+        second_done.set()
+
+    second_done = threading.Event()
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = _blas_threads()
+        with one_blas_thread():
+            # The calling thread has limited BLAS before (a linear start).
+            pass
+        threads = [threading.Thread(target=first), threading.Thread(target=second)]
+        for thread in threads:
+            thread.start()
+        second_done.wait()
+        after = _blas_threads()
+        for thread in threads:
+            thread.join()
+    assert set(before) == {2}
+    assert set(seen["first"]) == set(seen["second, after the first left"]) == {1}
+    assert after == before

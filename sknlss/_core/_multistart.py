@@ -1,6 +1,10 @@
 """Several starts of one fit, run in parallel; one start from candidate points;
 the initial state of a fitted model on a record."""
 
+import threading
+import warnings
+from contextlib import contextmanager
+
 import numpy as np
 from sklearn.utils.parallel import Parallel, delayed
 
@@ -18,6 +22,27 @@ def _guarded(fit_one, *args):
         return fit_one(*args)
     except START_ERRORS as error:
         return error
+
+
+@contextmanager
+def recorded_warnings():
+    """Record the warnings raised in the block, for the caller to issue again.
+
+    Yields the list that receives them as ``(message, category)`` pairs once
+    the block ends: a joblib worker process's warnings reach the caller only
+    so. In a thread other than the main one (the threading backend) they are
+    issued as they come and the list stays empty: ``warnings.catch_warnings``
+    swaps state of the whole process, so that threads recording side by side
+    would lose one another's warnings.
+    """
+    caught = []
+    if threading.current_thread() is not threading.main_thread():
+        yield caught
+        return
+    with warnings.catch_warnings(record=True) as records:
+        warnings.simplefilter("always")
+        yield caught
+    caught.extend((record.message, record.category) for record in records)
 
 
 def run_starts(fit_one, starts, n_jobs=None):

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
+import threadpoolctl
 from scipy.linalg import LinAlgError, qr, svd
 from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import ThreadpoolController
@@ -35,6 +36,20 @@ _limit_lock = threading.Lock()
 _limit_holders = {"count": 0, "limiter": None}
 
 
+def _free_blas_control():
+    """Let the next thread that sets the OpenBLAS limits take the control.
+
+    From version 3.8, threadpoolctl lets a single thread change the limits of
+    a pthreads OpenBLAS pool (shared by the process), the first to try, and
+    silently ignores the others while it lives (a pool worker lives on). The
+    count of :func:`one_blas_thread` decides which thread sets the limit and
+    which lifts it; afterwards no thread keeps the control.
+    """
+    controller = getattr(threadpoolctl, "OpenBLASController", None)
+    if hasattr(controller, "clear_controlling_thread"):
+        controller.clear_controlling_thread(force=True)
+
+
 @contextmanager
 def one_blas_thread():
     """A context in which BLAS runs on one thread: the factorisations of the
@@ -48,6 +63,7 @@ def one_blas_thread():
     """
     with _limit_lock:
         if _limit_holders["count"] == 0:
+            _free_blas_control()
             _limit_holders["limiter"] = _threadpools().limit(limits=1, user_api="blas")
         _limit_holders["count"] += 1
     try:
@@ -56,7 +72,9 @@ def one_blas_thread():
         with _limit_lock:
             _limit_holders["count"] -= 1
             if _limit_holders["count"] == 0:
+                _free_blas_control()
                 _limit_holders["limiter"].restore_original_limits()
+                _free_blas_control()
 
 
 # Damping is raised by this factor after a rejected step and lowered by

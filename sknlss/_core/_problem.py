@@ -302,7 +302,6 @@ class SimulationErrorProblem:
         # The losses are averaged over the simulation-error residuals only: the
         # penalties add a varying number of rows.
         self.n_residuals = self.target.size
-        self.validation_loss = self._validation_loss if self.val_rows.any() else None
         # Mean squared error on the cost rows above which a model is not judged
         # on the held-out rows (see ``held_out_loss``); set by the estimators.
         self.fit_loss_limit = np.inf
@@ -325,6 +324,13 @@ class SimulationErrorProblem:
     def _fitted_points(self, X):
         """``[x; u]`` at the cost rows, from the simulated states X."""
         return np.hstack([X[self.fit_rows], self.U[self.fit_rows]])
+
+    @property
+    def validation_loss(self):
+        """The held-out loss as a function of the parameters, None without
+        held-out rows; bound to this problem (a copy's to the copy, whose last
+        simulation it reuses)."""
+        return self._validation_loss if self.val_rows.any() else None
 
     def with_decay_scale(self, theta):
         """The problem with the scale of its weight decay fixed from the

@@ -37,7 +37,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from .._core._memory import check_memory
 from .._core._model import StateSpaceModel, parameter_count
-from .._core._multistart import START_ERRORS, fit_from, run_starts
+from .._core._multistart import START_ERRORS, fit_from, recorded_warnings, run_starts
 from .._core._problem import SimulationErrorProblem, fit_rows
 from .._core._sequences import (PERIODIC_TOLERANCE, every_sequence, holdout_masks,
                                 part_before_holdout, periodic_sequences, steady_state_rows,
@@ -828,15 +828,14 @@ def _fit_start(estimator, context, problem, start, seed, label, options):
 
     Returns the parameters, the optimiser's result, the warnings the start
     raised, as ``(message, category)`` pairs (they concern the user only if
-    this start is the one kept), and the seconds it took.
+    this start is the one kept; a start run in a thread has issued them, see
+    ``recorded_warnings``), and the seconds it took.
     """
     began = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with recorded_warnings() as caught:
         candidates = estimator._starting_points(context, start, seed)
         theta, result = fit_from(problem, candidates, label=label, **options)
-    return (theta, result, [(warning.message, warning.category) for warning in caught],
-            time.perf_counter() - began)
+    return theta, result, caught, time.perf_counter() - began
 
 
 #: How each named extrapolation continues the terms beyond the range of their
