@@ -44,9 +44,10 @@ from pathlib import Path
 import numpy as np
 from joblib import Parallel, delayed
 
-from bench_accuracy import _models, _seed
+from bench_accuracy import _models
 from bench_peers import _check_peer, _publish, _row
 
+from sknlss.__main__ import _seed
 from sknlss.datasets import fetch_cascaded_tanks, fetch_silverbox
 from sknlss.metrics import rms_error
 

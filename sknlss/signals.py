@@ -148,8 +148,8 @@ def multisine(n_samples_per_period, *, n_periods=1, n_realizations=1, lines="odd
         ``"random_odd"``: the odd lines, less one line chosen at random in each
         consecutive group of ``group_size`` odd lines (the detection lines of
         odd nonlinear distortion; a last, incomplete group keeps all its
-        lines). An explicit, strictly increasing integer
-        array is used as is and ``band`` is then ignored. DC and the Nyquist line are never
+        lines). An explicit, strictly increasing integer array is used as is
+        and ``band`` is then ignored. DC and the Nyquist line are never
         excited.
     band : tuple of float, default=(0.0, 0.45)
         ``(f_min, f_max)``, the excited frequency band as fractions of the

@@ -15,6 +15,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import StrOptions
 
 from .._core._model import parameter_count
+from .._core._multistart import recorded_warnings
 from .._core._sequences import undelayed_input
 from .._terms._bases import PolynomialBasis
 from .._terms._branches import BranchTerms
@@ -478,18 +479,17 @@ class DecoupledPNLSS(_BaseNonlinearStateSpace):
                                     else max(2, int(np.max(self._template().degree))))
         pnlss = clone(self._template())
         pnlss.set_params(**{name: getattr(self, name) for name in _FORWARDED})
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with recorded_warnings() as caught:
             self.pnlss_ = pnlss.fit(X, y, sequence_id=sequence_id)
-        for warning in caught:
+        for message, category in caught:
             # The PNLSS model is the starting point of the decoupling, which is
             # optimised again: whether its own iterations had settled is not
             # the result (the final optimisation warns for itself), and its
             # data are this estimator's, which checks them itself. What else
             # it says concerns this estimator's user, in its name.
-            if not issubclass(warning.category, (ConvergenceWarning, DataWarning)):
+            if not issubclass(category, (ConvergenceWarning, DataWarning)):
                 warn_at_caller(f"{type(self).__name__}: the PNLSS model it starts from: "
-                               f"{warning.message}", warning.category)
+                               f"{message}", category)
         return self._fit(X, y, sequence_id)
 
     def _template(self):

@@ -219,14 +219,6 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                     f"{PERIODIC_TOLERANCE:.0%} of its standard deviation. The fit treats "
                     "every sequence as periodic; predict simulates such a sequence from "
                     "its initial state.", DataWarning)
-            # Without estimated initial states, every sequence starts at rest.
-            if self.n_transient == 0 and not self.estimate_x0:
-                warn_at_caller(
-                    f"{type(self).__name__}: period={self.period} with n_transient=0 "
-                    "prepends nothing: every sequence is simulated from the initial "
-                    "state, not in its periodic steady state, and the transient of that "
-                    f"start is fitted. Set n_transient (n_transient={self.period} "
-                    "prepends the last period of every sequence).", DataWarning)
             if self.validation_fraction != "auto":
                 held_out = np.round(float(self.validation_fraction) * lengths).astype(int)
                 if np.any(held_out % self.period):
@@ -551,13 +543,22 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         self._warn_if_worse_than_the_mean(U, Y - self.output_offset_, starts)
 
     def _warn_if_not_steady(self, settling_time):
-        """Warn when, with ``period``, the ``n_transient`` samples prepended to
-        every sequence are fewer than the linear start's settling time: the
-        sequences then start before their periodic steady state, and every
-        sample, the rest of the transient with them, enters the cost.
-        ``n_transient=0`` has its own warning (``_check_periodic``)."""
-        if (self.period is None or self.estimate_x0 or self.n_transient == 0
-                or np.isinf(settling_time) or settling_time <= self.n_transient):
+        """Warn when, with ``period`` and without estimated initial states, the
+        ``n_transient`` samples prepended to every sequence are fewer than the
+        linear start's settling time: the sequences then start before their
+        periodic steady state, and every sample, the rest of the transient
+        with them, enters the cost. Prepending nothing always warns."""
+        if self.period is None or self.estimate_x0:
+            return
+        if self.n_transient == 0:
+            warn_at_caller(
+                f"{type(self).__name__}: period={self.period} with n_transient=0 "
+                "prepends nothing: every sequence is simulated from the initial "
+                "state, not in its periodic steady state, and the transient of that "
+                f"start is fitted. Set n_transient (n_transient={self.period} "
+                "prepends the last period of every sequence).", DataWarning)
+            return
+        if np.isinf(settling_time) or settling_time <= self.n_transient:
             return
         warn_at_caller(
             f"{type(self).__name__}: period={self.period} with n_transient="

@@ -248,9 +248,10 @@ def lpm_window(n_inputs, order, n_bins, bandwidth=None):
 
 def _lpm_windows(Uf, Yf, centres, width, order, bins):
     """LPM fits of the windows centred on the bins ``centres`` (0-based in
-    ``Uf`` and ``Yf``, whose DFT bin numbers are ``bins``): FRF, noise variance of the outputs, the variance gain of each
-    FRF unknown, degrees of freedom, whether the regressors are rank
-    deficient, and the power of each input in each window."""
+    ``Uf`` and ``Yf``, whose DFT bin numbers are ``bins``): FRF, noise
+    variance of the outputs, the variance gain of each FRF unknown, degrees
+    of freedom, whether the regressors are rank deficient, and the power of
+    each input in each window."""
     n_bins, n_u = Uf.shape
     half = width // 2
     # window of bin k: the `width` bins closest to it that lie in 1..n_bins
@@ -299,13 +300,12 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
     n_bins = (n - 1) // 2  # positive bins below Nyquist
     Uf = np.fft.fft(U, axis=0)[1 : n_bins + 1] / np.sqrt(n)
     Yf = np.fft.fft(Y, axis=0)[1 : n_bins + 1] / np.sqrt(n)
-    frequencies = np.arange(1, n_bins + 1) / n
-    in_band = _band_mask(np.arange(1, n_bins + 1), n, max_frequency)
+    bins = np.arange(1, n_bins + 1)
+    in_band = _band_mask(bins, n, max_frequency)
     bin_power = np.sum(np.abs(Uf) ** 2, axis=1)
     excited = bin_power > EXCITATION_THRESHOLD * bin_power.max(initial=0.0)
     width, degree = lpm_window(n_u, order, n_bins, bandwidth)
-    record = _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, degree,
-                       np.arange(n_bins))
+    record = _lpm_bins(Uf, Yf, bins, n, in_band, excited, width, degree)
     if n_u > 1 and width <= np.count_nonzero(excited) < n_bins:
         # Independent periodic inputs over several periods excite every k-th
         # bin only, or a multisine some lines only: a window of neighbouring
@@ -313,19 +313,18 @@ def _lpm_record(U, Y, order, bandwidth, max_frequency):
         # window of neighbouring excited bins does (the FRFs are as smooth
         # across the excited lines as across the bins). The windows that
         # separate more of the inputs' entries are kept.
-        on_lines = _lpm_bins(Uf[excited], Yf[excited], frequencies[excited],
-                             in_band[excited], excited[excited], width, degree,
-                             np.flatnonzero(excited))
+        on_lines = _lpm_bins(Uf[excited], Yf[excited], bins[excited], n, in_band[excited],
+                             excited[excited], width, degree)
         if np.count_nonzero(on_lines[3]) > np.count_nonzero(record[3]):
             record = on_lines
     return record, n_u > 1 and not np.any(record[3])
 
 
-def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order, bins):
+def _lpm_bins(Uf, Yf, bins, n, in_band, excited, width, order):
     """The LPM record of :func:`_lpm_record` from the DFT bins ``Uf``, ``Yf``
-    (at ``frequencies``; DFT bin numbers ``bins``),
-    with windows of ``width`` neighbouring bins centred on those ``in_band``;
-    the bins not ``excited`` get no window power, hence no estimate."""
+    (DFT bin numbers ``bins`` of a record of ``n`` samples), with windows of
+    ``width`` neighbouring bins centred on those ``in_band``; the bins not
+    ``excited`` get no window power, hence no estimate."""
     n_u = Uf.shape[1]
     centres = np.flatnonzero(in_band)
     if centres.size == 0:
@@ -352,7 +351,7 @@ def _lpm_bins(Uf, Yf, frequencies, in_band, excited, width, order, bins):
         # window narrower than its unknowns, on a very short record, is
         # underdetermined whatever the inputs.)
         window_power[deficient] = 0.0
-    return frequencies[centres], G, var, window_power
+    return bins[centres] / n, G, var, window_power
 
 
 def lpm_records(U, Y, starts, *, order=2, bandwidth=None, n_transient=0, max_frequency=None):
