@@ -10,8 +10,10 @@ from sklearn.utils._param_validation import Interval
 
 class Integers(Interval):
     """An :class:`~sklearn.utils._param_validation.Interval` of integers that
-    refuses booleans: Python counts ``True`` as the integer 1, so a plain
-    ``Interval(Integral, ...)`` would let ``n_states=True`` through.
+    refuses booleans and unsigned NumPy integers: Python counts ``True`` as the
+    integer 1, so a plain ``Interval(Integral, ...)`` would let
+    ``n_states=True`` through, and NumPy turns the sum of an unsigned and a
+    signed integer into a float, which no index accepts.
 
     Parameters
     ----------
@@ -25,7 +27,11 @@ class Integers(Interval):
         super().__init__(Integral, left, right, closed=closed)
 
     def is_satisfied_by(self, val):
-        return not isinstance(val, (bool, np.bool_)) and super().is_satisfied_by(val)
+        return (not isinstance(val, (bool, np.bool_, np.unsignedinteger))
+                and super().is_satisfied_by(val))
+
+    def __str__(self):
+        return f"{super().__str__()} (a Python int or a signed NumPy int)"
 
 
 def binary_magnitude(values, axis=0):

@@ -22,6 +22,9 @@ def test_sequence_bounds():
     np.testing.assert_array_equal(sequence_bounds(["run_b", "run_b", "run_a"], 3), [0, 2, 3])
     names = np.array(["x", "y", "y"], dtype=object)
     np.testing.assert_array_equal(sequence_bounds(names, 3), [0, 1, 3])
+    # A DataFrame column of object dtype holding integers.
+    numbers = np.array([4, 4, 2], dtype=object)
+    np.testing.assert_array_equal(sequence_bounds(numbers, 3), [0, 2, 3])
 
 
 @pytest.mark.parametrize(
@@ -65,6 +68,19 @@ def test_holdout_masks():
     assert not validation.any() and fit.sum() == 18
     with pytest.raises(ValueError, match="leave no sample"):
         holdout_masks(starts, 10, 0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(offset=st.floats(-1e3, 1e3), scale=st.floats(1e-3, 1e3), seed=st.integers(0, 2**16))
+def test_periodic_sequences_ignore_each_column_s_offset_and_scale(offset, scale, seed):
+    rng = np.random.default_rng(seed)
+    period, starts = 8, np.array([0, 32, 64])
+    U = rng.standard_normal((64, 2))
+    U[32:] = np.tile(U[32:40], (4, 1))
+    expected = periodic_sequences(U, starts, period)
+    np.testing.assert_array_equal(expected, [False, True])
+    moved = U * [1.0, scale] + [0.0, offset]
+    np.testing.assert_array_equal(periodic_sequences(moved, starts, period), expected)
 
 
 @settings(max_examples=50, deadline=None)
@@ -157,6 +173,17 @@ def test_x_must_be_2d(data, X_shape, match):
     X, y = data
     with pytest.raises(ValueError, match=match):
         _FirstOrder().fit(np.ones(X_shape), y)
+
+
+@pytest.mark.parametrize("X_shape, y_shape, argument", [
+    ((8, 32), (8, 32), "X has 8 sample"), ((1, 50), (50,), "X has 1 sample"),
+    ((50, 1), (1, 50), "y has 1 sample"),
+])
+def test_signals_stored_as_rows_are_refused(X_shape, y_shape, argument):
+    # Realizations as rows (the layout of multisine, or of MATLAB signals)
+    # would be fitted as dozens of inputs and outputs.
+    with pytest.raises(ValueError, match=argument + r".*rows are time samples.*reshape"):
+        _FirstOrder().fit(np.ones(X_shape), np.ones(y_shape))
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
@@ -305,8 +332,11 @@ def test_score_skips_transient(data):
     y_true[~keep] -= 50.0
     assert model.score(X, y_true, sequence_id=sequence_id) == pytest.approx(
         r2_score(y_true[keep], y_seq[keep]))
-    with pytest.raises(ValueError, match="leaves no sample"):
+    with pytest.raises(ValueError, match="leaves 0 sample"):
         _FirstOrder(n_transient=50).fit(X, y).score(X, y)
+    # R² of one sample is undefined.
+    with pytest.raises(ValueError, match="leaves 1 sample.*two or more"):
+        _FirstOrder(n_transient=49).fit(X, y).score(X, y)
 
 
 def test_score_weights_the_samples(data):

@@ -223,9 +223,11 @@ def _problem(terms="polynomial", estimate_x0=True, period=None, **options):
     Y = model.simulate(theta, U[index], sim_starts)[0][original]
     Y = Y + 0.01 * np.random.default_rng(9).standard_normal(Y.shape)
     rows = fit_rows(U, Y, starts, n_transient=period_length, validation_fraction=0.0,
-                    steady_state_period=period_length)
+                    steady_state=True)
     problem = SimulationErrorProblem(model, rows, frequency_period=period and period_length,
                                      **options)
+    if problem.weight_decay:
+        problem = problem.with_decay_scale(theta)
     return problem, theta
 
 
@@ -348,6 +350,28 @@ def test_restricted_problem():
     np.testing.assert_array_equal(r, r_full)
     np.testing.assert_array_equal(J, J_full[:, free])
     assert restricted.validation_loss is None
+
+
+def test_a_restricted_problem_decays_only_free_terms():
+    model, theta = _model("polynomial", DIMS["SISO"], seed=7)
+    U = 0.5 * np.random.default_rng(8).standard_normal((48, 1))
+    rows = fit_rows(U, model.simulate(theta, U, np.array([0, 48]))[0], np.array([0, 48]),
+                    n_transient=0, validation_fraction=0.0)
+    problem = SimulationErrorProblem(model, rows, weight_decay=1.0)
+    linear = problem.model.linear_columns
+    # The terms are held: the decay is left out, with no scale to compute.
+    restricted = problem.restricted(theta, linear)
+    assert restricted.weight_decay == 0.0 and problem.decay_scale is None
+    r_linear, _ = restricted.residual(theta[linear], True)
+    assert r_linear.size == problem.n_residuals
+    # With free terms, a start scales the decay of its own copy.
+    every = np.arange(theta.size)
+    start = problem.restricted(theta, every).with_decay_scale(theta)
+    r, J = start.residual(theta, True)
+    r_full, J_full = problem.with_decay_scale(theta).residual(theta, True)
+    assert r.size > problem.n_residuals and problem.decay_scale is None
+    np.testing.assert_array_equal(r, r_full)
+    np.testing.assert_array_equal(J, J_full)
 
 
 def _held_out_problem():

@@ -669,6 +669,26 @@ def test_a_fallback_made_by_the_boundedness_guard_warns(name, record, monkeypatc
     assert model.validation_loss_history_[0] == model.linear_loss_
 
 
+def test_a_failed_first_start_among_unbounded_ones_falls_back(record, monkeypatch):
+    # The first start fails numerically, the guard excludes the other: the
+    # linear model is kept (the failed start's outcome was unpacked instead).
+    u, y = record
+    starting_points = PNLSSRegressor._starting_points
+
+    def failing_first(self, context, start, seed):
+        if start == 0:
+            raise ValueError("a numerical failure")
+        return starting_points(self, context, start, seed)
+
+    monkeypatch.setattr(PNLSSRegressor, "_starting_points", failing_first)
+    monkeypatch.setattr("sknlss._estimators._nonlinear.stays_bounded",
+                        lambda problem, theta: False)
+    with pytest.warns(LinearFallbackWarning):
+        model = PNLSSRegressor(2, degree=(2, 3), max_iter=5, n_init=2, random_state=0).fit(u, y)
+    assert model.fell_back_to_linear_
+    np.testing.assert_array_equal(model.start_status_, ["failed", "unbounded"])
+
+
 @pytest.mark.parametrize("name", FACTORIES)
 def test_check_bounded_false_ranks_the_starts_on_the_held_out_end_alone(
         name, record, monkeypatch):
@@ -912,6 +932,25 @@ def test_whole_period_records_are_scored_on_every_sample(name, periodic):
     rows = slice(2 * period, None)
     expected = r2_score(y[part][rows], model.predict(X[part])[rows])
     assert model.score(X[part], y[part]) == pytest.approx(expected, rel=1e-9)
+
+
+def test_score_and_predict_agree_on_which_records_are_in_steady_state():
+    # Two inputs, one around 100: a random record is simulated from its
+    # initial state, and its transient must be left out of the score too.
+    rng = np.random.default_rng(1)
+    period = 64
+    U = np.vstack([np.tile(0.3 * rng.standard_normal((period, 2)), (6, 1)) for _ in range(2)])
+    U += 0.005 * rng.standard_normal(U.shape)
+    y = np.concatenate([_duffing(part[:, :1] + 0.3 * part[:, 1:]) for part in np.split(U, 2)])
+    offset = np.array([0.0, 100.0])
+    model = PNLSSRegressor(2, degree=(2,), period=period, n_transient=period, n_init=1,
+                           max_iter=3, validation_fraction=0, random_state=0)
+    model.fit(U + offset, y, sequence_id=np.repeat([0, 1], 6 * period))
+    U_test = 0.3 * rng.standard_normal((4 * period, 2))
+    y_test = _duffing(U_test[:, :1] + 0.3 * U_test[:, 1:])
+    rows = slice(period, None)
+    expected = r2_score(y_test[rows], model.predict(U_test + offset)[rows])
+    assert model.score(U_test + offset, y_test) == pytest.approx(expected, rel=1e-12)
 
 
 def test_the_linear_model_kept_on_a_short_record_stays_stable():

@@ -183,3 +183,14 @@ def test_one_blas_thread_in_overlapping_threads():
     assert set(before) == {2}
     assert set(seen["first"]) == set(seen["second, after the first left"]) == {1}
     assert after == before
+
+
+def test_directions_dropped_from_fewer_residuals_than_parameters():
+    # Six residuals, ten parameters of which four leave the residual as it
+    # is: the six others are all identifiable, and none may be dropped.
+    rng = np.random.default_rng(0)
+    J = np.hstack([rng.standard_normal((6, 6)), np.zeros((6, 4))])
+    b = rng.standard_normal(6)
+    result = levenberg_marquardt(lambda theta, jacobian: (J @ theta - b, J if jacobian else None),
+                                 np.zeros(10), n_drop=4, max_iter=200, tol=0)
+    assert result.loss_history[-1] < 1e-20

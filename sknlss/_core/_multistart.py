@@ -92,7 +92,7 @@ def fit_from(problem, candidates, *, label, **options):
     result : LMResult
     """
     for theta0 in candidates:
-        if getattr(problem, "weight_decay", 0):
+        if problem.weight_decay:
             # The decay weighs each term's contribution from this start.
             problem = problem.with_decay_scale(theta0)
         initial = problem.residual(theta0, True)

@@ -301,7 +301,8 @@ def levenberg_marquardt(
                 converged = True
                 break
             rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps))
-            rank = max(1, min(rank, s.size - n_drop))
+            # Of the parameters' directions, n_drop leave the output as it is.
+            rank = max(1, min(rank, Vt.shape[1] - n_drop))
             s, Vt, projected = s[:rank], Vt[:rank], projected[:rank]
             if damping is None:
                 damping = s[0]

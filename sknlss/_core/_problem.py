@@ -49,7 +49,7 @@ class FitRows:
     original: np.ndarray
 
 
-def fit_rows(U, Y, starts, *, n_transient, validation_fraction, steady_state_period=None):
+def fit_rows(U, Y, starts, *, n_transient, validation_fraction, steady_state=False):
     """The rows of a fit: cost, hold-out, and the transient handling.
 
     Parameters
@@ -59,21 +59,21 @@ def fit_rows(U, Y, starts, *, n_transient, validation_fraction, steady_state_per
     starts : ndarray
         Sequence boundaries.
     n_transient : int or ndarray of shape (n_sequences,)
-        Samples per sequence kept out of the cost. With
-        ``steady_state_period``, the last ``n_transient`` samples of every
+        Samples per sequence kept out of the cost. With ``steady_state``,
+        the last ``n_transient`` samples of every
         sequence are prepended to it instead, so that it starts in (nearly)
         periodic steady state and all its samples enter the cost.
     validation_fraction : float or ndarray of shape (n_sequences,)
         Share of the end of every sequence held out.
-    steady_state_period : int, default=None
-        Period of a periodic excitation (every sequence a whole number of
-        periods); None for a transient cut from the records.
+    steady_state : bool, default=False
+        Whether the excitation is periodic (every sequence a whole number of
+        periods); else the transient is cut from the records.
 
     Returns
     -------
     rows : FitRows
     """
-    periodic = steady_state_period is not None and np.any(np.asarray(n_transient) > 0)
+    periodic = steady_state and np.any(np.asarray(n_transient) > 0)
     fit_mask, val_mask = holdout_masks(starts, 0 if periodic else n_transient,
                                        validation_fraction)
     if not periodic:
@@ -261,16 +261,13 @@ class SimulationErrorProblem:
         units of the signals or the parametrisation. Like a prior, its weight
         does not grow with the number of samples: it matters on short records
         and fades on long ones.
-    x0 : ndarray of shape (n_states,), default=None
-        Initial state of every sequence when the model does not estimate it
-        (zero when None).
     held : ndarray of int, default=None
         Parameters that a search holds at their starting values (see
         :func:`~sknlss._core._multistart.fit_from`); None holds none.
     """
 
     def __init__(self, model, rows, *, frequency_period=None, stability_penalty=0.0,
-                 weight_decay=0.0, x0=None, held=None):
+                 weight_decay=0.0, held=None):
         self.model = model
         self.held = np.zeros(0, dtype=np.int64) if held is None else np.asarray(held)
         self.rows = rows
@@ -279,7 +276,6 @@ class SimulationErrorProblem:
         self.period = frequency_period
         self.stability_penalty = stability_penalty
         self.weight_decay = weight_decay
-        self.x0 = None if model.estimate_x0 else x0
         # The Jacobian holds the cost rows only, in order.
         self.jacobian_rows = np.where(self.fit_rows, np.cumsum(self.fit_rows) - 1,
                                       -1).astype(np.int64)
@@ -315,11 +311,11 @@ class SimulationErrorProblem:
     # ----------------------------------------------------------- simulation
     def simulate(self, theta):
         """Outputs, states and the divergence flag over the simulated rows."""
-        return self.model.simulate(theta, self.U, self.starts, self.x0)
+        return self.model.simulate(theta, self.U, self.starts)
 
     def simulate_input(self, theta, U):
         """Outputs, states and divergence flag for another input on the same rows."""
-        return self.model.simulate(theta, U, self.starts, self.x0)
+        return self.model.simulate(theta, U, self.starts)
 
     def _fitted_points(self, X):
         """``[x; u]`` at the cost rows, from the simulated states X."""
@@ -354,7 +350,7 @@ class SimulationErrorProblem:
         local = None
         if jacobian:
             Y_model, X, J, local, diverged = model.sensitivities(
-                theta, self.U, self.starts, self.jacobian_rows, self.x0,
+                theta, self.U, self.starts, self.jacobian_rows,
                 with_local=bool(self.stability_penalty))
         else:
             Y_model, X, diverged = self.simulate(theta)
@@ -435,10 +431,6 @@ class SimulationErrorProblem:
 
     def _decay_rows(self, theta, jacobian):
         """Rows of the weight decay (scaled terms' parameters) and their Jacobian."""
-        if self.decay_scale is None:
-            # Outside a start (a search restricted to the linear part), the
-            # first point evaluated sets the scale.
-            self.decay_scale = self._decay_scale(theta)
         decayed = np.flatnonzero(self.decay_scale)
         columns = self.model.terms_columns[decayed]
         weight = np.sqrt(self.weight_decay) * self.decay_scale[decayed]
@@ -453,9 +445,16 @@ class SimulationErrorProblem:
         """The problem in the parameters ``free`` only, the others fixed at ``theta``.
 
         Returns an object with the ``residual`` and ``validation_loss`` of the
-        free parameters.
+        free parameters. The weight decay is left out when none of the
+        parameters it decays is free (a search in the linear part): its rows
+        would stay what they are at ``theta``.
         """
-        return _Restricted(self, theta, free)
+        problem = self
+        decayed = self.model.terms_columns[np.flatnonzero(self.model.terms.decay_mask())]
+        if self.weight_decay and not np.isin(decayed, free).any():
+            problem = copy.copy(self)
+            problem.weight_decay = 0.0
+        return _Restricted(problem, theta, free)
 
     def fit_loss(self, theta):
         """Mean squared simulation error of ``theta`` on the cost rows; inf when
@@ -506,6 +505,7 @@ class _Restricted:
     def __init__(self, problem, theta, free):
         self._problem, self._base, self._free = problem, theta.copy(), free
         self.n_residuals = problem.n_residuals
+        self.weight_decay = problem.weight_decay
         self.validation_loss = (None if problem.validation_loss is None
                                 else self._validation_loss)
 
@@ -519,6 +519,12 @@ class _Restricted:
         """The entries (columns, for a Jacobian) of ``values`` that belong to
         the free parameters."""
         return values[..., self._free]
+
+    def with_decay_scale(self, phi):
+        """The restricted problem with its decay scaled from ``phi`` (see
+        ``SimulationErrorProblem.with_decay_scale``)."""
+        return _Restricted(self._problem.with_decay_scale(self.full(phi)), self._base,
+                           self._free)
 
     def residual(self, phi, jacobian):
         r, J = self._problem.residual(self.full(phi), jacobian)

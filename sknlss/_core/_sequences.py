@@ -5,10 +5,12 @@ Several experiments (records, realizations) are concatenated rows; the
 sequence ``k`` occupies rows ``starts[k]:starts[k + 1]``.
 """
 
+import numbers
+
 import numpy as np
 
 #: A sequence repeats with the period when its periods differ from their mean
-#: by at most this fraction of its standard deviation (RMS): a random input
+#: by at most this fraction of each column's standard deviation (RMS): a random input
 #: differs by 70 % or more, a measured periodic one by its noise.
 PERIODIC_TOLERANCE = 0.2
 
@@ -38,8 +40,13 @@ def sequence_bounds(sequence_id, n_samples):
             f"sequence_id must be a 1-D array with one label per sample: got shape "
             f"{ids.shape} for X with {n_samples} samples."
         )
-    if ids.dtype.kind == "O" and all(isinstance(label, str) for label in ids):
-        ids = ids.astype(str)
+    if ids.dtype.kind == "O":
+        # A column of a DataFrame of object dtype holds Python objects.
+        if all(isinstance(label, str) for label in ids):
+            ids = ids.astype(str)
+        elif all(isinstance(label, numbers.Integral) and not isinstance(label, bool)
+                 for label in ids):
+            ids = ids.astype(np.int64)
     if ids.dtype.kind not in "iubUS":
         # A float that is not a whole number is more likely a time vector
         # passed by mistake than a label.
@@ -192,10 +199,11 @@ def period_blocks(mask, starts, period):
 def periodic_sequences(U, starts, period, tolerance=PERIODIC_TOLERANCE):
     """Which sequences of ``U`` repeat with ``period``.
 
-    A sequence repeats when it is a whole number of periods and its periods
-    differ from their mean by an RMS value within ``tolerance`` times its own
-    standard deviation. A single period counts as repeating: nothing tells it
-    apart from one that does.
+    A sequence repeats when it is a whole number of periods and, in every
+    column, its periods differ from their mean by an RMS value within
+    ``tolerance`` times that column's standard deviation in the sequence (so
+    that neither an offset nor the scale of another column decides). A single
+    period counts as repeating: nothing tells it apart from one that does.
 
     Returns
     -------
@@ -206,8 +214,8 @@ def periodic_sequences(U, starts, period, tolerance=PERIODIC_TOLERANCE):
         if (end - begin) % period:
             continue
         periods = U[begin:end].reshape(-1, period, U.shape[1])
-        spread = np.sqrt(np.mean((periods - periods.mean(axis=0)) ** 2))
-        repeats[k] = spread <= tolerance * np.std(U[begin:end])
+        spread = np.sqrt(np.mean((periods - periods.mean(axis=0)) ** 2, axis=(0, 1)))
+        repeats[k] = np.all(spread <= tolerance * np.std(U[begin:end], axis=0))
     return repeats
 
 
@@ -217,7 +225,7 @@ def delayed_input(U, starts, delay, period=None):
     The samples that the delay brings in before the start of a sequence were
     not measured: a sequence that repeats with ``period`` (see
     :func:`periodic_sequences`) takes them from its own periodic continuation,
-    any other takes zero, the mean of a normalised input.
+    any other takes zero (a centred input's mean).
 
     Returns
     -------

@@ -60,10 +60,15 @@ def _record_input(estimator, X, *, reset, ensure_min_samples=1):
             # scikit-learn's message for a 1-D array, whose advice to reshape
             # it into one sample would turn a record into a single sample.
             if "got 1D array" not in str(error):
+                if reset:
+                    # (A record of one row is too short for scikit-learn.)
+                    _refuse_rows_as_signals(getattr(X, "shape", ()), "X")
                 raise
             raise ValueError(
                 "X must be 2-D, of shape (n_samples, n_inputs); got a 1-D array. Reshape "
                 "your data: a single input signal u is passed as u.reshape(-1, 1).") from None
+    if reset:
+        _refuse_rows_as_signals(X.shape, "X")
     _refuse_gaps(X, "X")
     return X
 
@@ -74,8 +79,23 @@ def _record_output(y):
     with naming("y"):
         y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y",
                         ensure_all_finite=False)
+    _refuse_rows_as_signals(y.shape, "y")
     _refuse_gaps(y, "y")
     return y
+
+
+def _refuse_rows_as_signals(shape, argument):
+    """Refuse a training record of ``shape`` with fewer samples than
+    signals: it is nearly always a record transposed, whose columns would be
+    fitted as hundreds of inputs or outputs (and the memory run out)."""
+    if len(shape) == 2 and 0 < shape[0] < shape[1]:
+        raise ValueError(
+            f"{argument} has {shape[0]} sample(s) (rows) and {shape[1]} columns: rows are "
+            "time samples, columns are signals. A record stored as a row (as multisine "
+            "returns its realizations, or as MATLAB holds signals) is passed transposed: "
+            "one signal u as u.reshape(-1, 1), the realizations of one input as "
+            "u.reshape(-1, 1) with sequence_id=np.repeat(np.arange(n_realizations), "
+            "n_samples).")
 
 
 def _refuse_gaps(values, argument):
@@ -180,8 +200,8 @@ def _unfitted_on_error(fit):
 class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
     """Base class of the sknlss state-space estimators.
 
-    Subclasses set, in ``_fit_normalized``, at least ``A_``, ``B_``, ``C_``,
-    ``D_``, ``x0_`` and ``n_params_``, and implement ``_simulate_normalized``.
+    Subclasses implement ``_fit_normalized``, which sets at least ``A_``,
+    ``B_``, ``C_``, ``D_``, ``x0_`` and ``n_params_``, and ``_fitted_model``.
     """
 
     _parameter_constraints: dict = {
@@ -246,9 +266,15 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
         self.n_outputs_ = Y.shape[1]
         self.u_offset_, self.u_scale_ = _offset_and_scale(X, "X", "input column(s)")
         self.y_offset_, self.y_scale_ = _offset_and_scale(Y, "y", "output(s)")
+        self._choose_offsets()
         U = _normalised(X, self.u_offset_, self.u_scale_)
         Yn = _normalised(Y, self.y_offset_, self.y_scale_)
         return U, Yn, starts
+
+    def _choose_offsets(self):
+        """Set ``u_offset_`` and ``y_offset_``, the points the signals are
+        normalised about: the means they hold when called, unless a subclass
+        expands its model around another point."""
 
     @_unfitted_on_error
     def fit(self, X, y, *, sequence_id=None):
@@ -533,10 +559,13 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
             raise ValueError(
                 f"y has {y.shape[1]} output(s), the model was fitted on {y_pred.shape[1]}."
             )
-        keep = self._scored_rows(sequence_bounds(sequence_id, len(y_pred)), X)
-        if not keep.any():
+        starts = sequence_bounds(sequence_id, len(y_pred))
+        keep = self._scored_rows(starts, self._model_input(X, starts))
+        if keep.sum() < 2:
+            # R² compares the samples with their mean: one is not enough.
             raise ValueError(
-                f"n_transient={self.n_transient} leaves no sample to score."
+                f"n_transient={self.n_transient} leaves {keep.sum()} sample(s) to score; "
+                "R² needs two or more."
             )
         if sample_weight is not None:
             with naming("sample_weight"):

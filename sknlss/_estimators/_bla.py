@@ -481,6 +481,9 @@ class BLAEstimator(_BaseStateSpace):
     period : int, default=None
         Samples per period of a periodic excitation. Every sequence must then
         hold the same whole number of periods. ``None`` for non-periodic data.
+        ``predict`` still starts every sequence from its initial state: to
+        simulate a periodic record in steady state, prepend its last period
+        and drop it from the output.
     method : {"auto", "robust", "lpm"}, default="auto"
         Nonparametric method: ``"auto"`` is ``"robust"`` when ``period`` is
         given and ``"lpm"`` otherwise. ``"lpm"`` with ``period`` given ignores

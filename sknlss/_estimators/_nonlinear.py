@@ -170,17 +170,13 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return True
 
     # ------------------------------------------------------------------- fit
-    def _validate_training_data(self, X, y, sequence_id):
-        U, Y, starts = super()._validate_training_data(X, y, sequence_id)
+    def _choose_offsets(self):
         if not self._centred():
             self._warn_if_offset()
             # Scale only: the model is expanded around the signals' own zero,
             # not around their means.
-            U = np.ascontiguousarray(U + self.u_offset_ / self.u_scale_)
-            Y = np.ascontiguousarray(Y + self.y_offset_ / self.y_scale_)
             self.u_offset_ = np.zeros_like(self.u_offset_)
             self.y_offset_ = np.zeros_like(self.y_offset_)
-        return U, Y, starts
 
     def _warn_if_offset(self):
         """Warn when a signal's mean exceeds its standard deviation: uncentred,
@@ -435,7 +431,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         n_samples = int(fit_rows(U, Y, starts, n_transient=self.n_transient,
                                  validation_fraction=self._sequence_fractions(
                                      min(self._row_shares(shares)), starts),
-                                 steady_state_period=self.period).fit_rows.sum())
+                                 steady_state=self.period is not None).fit_rows.sum())
         # The stability penalty has a row per fitted sample at most, the weight
         # decay one per term parameter.
         n_penalty = ((n_samples if self.stability_penalty else 0)
@@ -494,14 +490,16 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         check_excitation(U, starts, self.n_states, Y.shape[1])
         bla_rows = fit_rows(U, Y, starts, n_transient=self.n_transient,
                             validation_fraction=self._sequence_fractions(max(shares), starts),
-                            steady_state_period=self.period)
-        linear = self._linear_start(U, Y, starts, bla_rows.fit_rows[bla_rows.original])
-        settling_time = _settling_time(linear, U, Y, starts)
+                            steady_state=self.period is not None)
+        fit_mask = bla_rows.fit_rows[bla_rows.original]
+        linear = self._linear_start(U, Y, starts, fit_mask)
+        # Like the linear start, it sees none of the held-out tails.
+        settling_time = _settling_time(linear, *part_before_holdout(U, Y, starts, fit_mask)[:3])
         self._warn_if_not_steady(settling_time)
         self.fit_transient_ = self._cost_transient(settling_time, starts)
         rows = {share: fit_rows(U, Y, starts, n_transient=self._sequence_transients(starts),
                                 validation_fraction=self._sequence_fractions(share, starts),
-                                steady_state_period=self.period)
+                                steady_state=self.period is not None)
                 for share in self._row_shares(shares)}
         x0_held = self._holds_x0(settling_time)
         problem_sets = [{share: self._problem(terms, rows[share], x0_held) for share in rows}
@@ -584,9 +582,9 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         the output's mean: such a model should not be taken silently."""
         x0 = np.broadcast_to(self.x0_, (len(starts) - 1, self.n_states))
         Y_model, _, diverged = self._simulate_normalized(U, starts, x0, steady_state=True)
-        # Periodic records are simulated in steady state: all their rows count.
-        rows = transient_mask(starts, 0 if self.period is not None
-                              else self._sequence_transients(starts))
+        # As in the cost, every row of a sequence simulated in steady state counts.
+        rows = transient_mask(starts, np.where(self._steady_sequences(starts, U), 0,
+                                               self._sequence_transients(starts)))
         if not rows.any():
             return
         error = np.inf if diverged else float(np.max(
@@ -669,8 +667,6 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
                   for kept, loss, state in zip(preferred, losses, status)]
         losses = preferred
         best = int(np.argmin(losses))
-        theta_best, result, start_warnings, _ = outcomes[best]
-        c_best, j_best, _, seed_best = runs[best]
         self.start_losses_ = np.asarray(losses)
         linear_loss = common[0].held_out_loss(linear_theta)
         # A nonlinear model that does worse than the linear model there is not
@@ -701,6 +697,8 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         if self.verbose:
             print(f"{self._label}: start {best} kept (held-out loss {losses[best]:.4g} "
                   f"against the linear model's {linear_loss:.4g}).", flush=True)
+        theta_best, result, start_warnings, _ = outcomes[best]
+        c_best, j_best, _, seed_best = runs[best]
         for message, category in start_warnings:
             warn_at_caller(message, category)
         self._record_start(contexts[c_best], j_best, seed_best)
