@@ -170,6 +170,29 @@ def test_lpm_combines_records_at_equal_frequencies():
     assert np.median(both.total_variance / one.total_variance) < 0.7
 
 
+@pytest.mark.parametrize("lengths", [(300, 301), (301, 300)])
+def test_lpm_of_records_without_a_common_frequency(lengths):
+    # Records of 300 and 301 samples share no DFT bin: each estimate must stay
+    # at its own frequency, whichever record comes first.
+    rng = np.random.default_rng(2)
+    u = rng.standard_normal((sum(lengths), 1))
+    starts = np.concatenate([[0], np.cumsum(lengths)])
+    y = np.concatenate([lfilter(NUM, DEN, u[a:b, 0]) for a, b in zip(starts[:-1], starts[1:])])
+    estimate = lpm_frf(u, y[:, None], starts)
+    assert np.all(np.diff(estimate.frequencies) > 0)
+    true = _true_frf(NUM, DEN, estimate.frequencies)
+    error = np.abs(estimate.frf[:, 0, 0] - true) / np.abs(true)
+    # (The local polynomials bias the sharp resonance a little.)
+    assert np.median(error) < 0.01 and error.max() < 0.1
+
+
+def test_robust_frf_names_a_realization_without_input():
+    U, Y, starts, _ = _periodic_data(n_periods=2, n_realizations=4)
+    U[starts[2]:starts[3]] = 0.0  # a noise-only record among the realizations
+    with pytest.raises(ValueError, match=r"sequence\(s\) \[2\].*no power at the excited"):
+        robust_frf(U, Y, starts, 256)
+
+
 def test_lpm_window_defaults_and_fallbacks():
     assert lpm_window(1, 2, 500) == (9, 2)  # 6 unknowns, 3 degrees of freedom
     assert lpm_window(2, 2, 500) == (13, 2)  # 9 unknowns, 4 degrees of freedom

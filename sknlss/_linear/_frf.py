@@ -175,6 +175,16 @@ def robust_frf(U, Y, starts, period, *, n_transient=0, max_frequency=None):
     if not keep.any():
         raise ValueError("The input X has no power on any usable frequency line.")
     Uf, Yf = Uf[:, :, keep], Yf[:, :, keep]
+    # Every realization's FRF divides by its own input (a noise-only record
+    # beside the excited ones would make it singular).
+    own = np.sum(np.abs(Uf.mean(axis=1)) ** 2, axis=(1, 2))
+    silent = np.flatnonzero(~(own > EXCITATION_THRESHOLD * own.max()))
+    if silent.size:
+        raise ValueError(
+            f"The input of sequence(s) {silent.tolist()} (in the order of the rows) has no "
+            "power at the excited lines: the robust method divides by each realization's "
+            "input. Leave such a record out, or fit without `period` (the Local Polynomial "
+            "Method).")
 
     n_blocks = n_real // n_u
     used = n_blocks * n_u
@@ -259,7 +269,7 @@ def _lpm_windows(Uf, Yf, centres, width, order, bins):
     index = first[:, None] + np.arange(width)
     # The polynomials are in frequency, whatever the spacing of the bins (the
     # spacing is 1 for consecutive bins).
-    spacing = (bins[-1] - bins[0]) / max(bins.size - 1, 1)
+    spacing = (bins[-1] - bins[0]) / (bins.size - 1) if bins.size > 1 else 1.0
     offset = (bins[index] - bins[centres][:, None]) / (max(half, 1) * spacing)
     powers = offset[..., None] ** np.arange(order + 1)  # (bin, width, order+1)
     Uw = Uf[index]  # (bin, width, n_u)
@@ -408,6 +418,11 @@ def lpm_estimate(records, power_threshold=LPM_POWER_THRESHOLD):
     else:
         var = np.concatenate([p[2] for p in parts])
         weight = 1.0 / np.maximum(var, np.finfo(float).tiny)
+    # Sorted by frequency, as np.unique sorts them (records of different
+    # lengths interleave their bins).
+    order = np.argsort(freqs, kind="stable")
+    freqs, G, estimated, weight = freqs[order], G[order], estimated[order], weight[order]
+    var = None if var is None else var[order]
     unique, group = np.unique(freqs, return_inverse=True)
     if unique.size < freqs.size:
         weight = weight * estimated
