@@ -36,6 +36,9 @@ _F = np.array([[
 
 _RMS = 0.05
 _NOISE_LEVEL = 1e-3
+# Samples over which the slowest mode of the linear part (|pole| 0.967)
+# decays to 1e-12 of its size: the run-in before the kept periods.
+_RUN_IN = int(np.ceil(np.log(1e-12) / np.log(np.max(np.abs(np.linalg.eigvals(_A))))))
 
 _DESCR = """\
 Reference PNLSS system (PNLSS 1.0 toolbox tutorial, VUB ELEC)
@@ -47,7 +50,9 @@ with 2 states, 1 input, 1 output; zeta = eta = the 16 monomials of total degree
 
 Excitation: odd random-phase multisine, flat amplitude on the odd lines up to
 90 % of the Nyquist frequency, RMS 0.05, one realization per sequence, several
-periods each, in steady state (one extra period simulated first and dropped).
+periods each, in steady state (the periods of the first 815 samples, at
+least one, simulated first and dropped: the slowest mode decays to 1e-12 in
+them).
 Noise: n = 1e-3 std(y) e with white Gaussian e, coloured by n[t] + n[t+1]
 (t = 1 .. end-2 of each realization), added to y.
 
@@ -80,8 +85,9 @@ def make_pnlss_reference(*, n_realizations=4, n_periods=3, n_samples_per_period=
     n_realizations : int, default=4
         Number of realizations (independent phases), one sequence each.
     n_periods : int, default=3
-        Periods kept per realization, after one dropped period that brings
-        the system to its periodic steady state.
+        Periods kept per realization, after the dropped periods that bring
+        the system to its periodic steady state (one when a period has 815
+        samples or more).
     n_samples_per_period : int, default=1024
         Samples per period.
     noise : bool, default=True
@@ -131,15 +137,16 @@ def make_pnlss_reference(*, n_realizations=4, n_periods=3, n_samples_per_period=
     rng = check_random_state(random_state)
     exponents = monomial_exponents(2, 1, (2, 3))
     n = int(n_samples_per_period)
-    u, lines = multisine(n, n_periods=n_periods + 1, n_realizations=n_realizations,
+    n_dropped = -(-_RUN_IN // n)
+    u, lines = multisine(n, n_periods=n_periods + n_dropped, n_realizations=n_realizations,
                          lines="odd", band=(0.0, 0.45), rms=_RMS, random_state=rng)
     starts = np.arange(n_realizations + 1, dtype=np.int64) * u.shape[1]
     model = StateSpaceModel(2, 1, 1, PolynomialTerms(2, 1, exponents, exponents))
     theta = model.pack({"A": _A, "B": _B, "C": _C, "D": _D, "E": _E, "F": _F})
     y_all = model.simulate(theta, u.reshape(-1, 1), starts)[0]
-    # The first period of every realization is the transient from rest.
-    y_clean = y_all[:, 0].reshape(n_realizations, -1)[:, n:]
-    u = u[:, n:]
+    # The first periods of every realization hold the transient from rest.
+    y_clean = y_all[:, 0].reshape(n_realizations, -1)[:, n_dropped * n:]
+    u = u[:, n_dropped * n:]
     y = y_clean.copy()
     if noise:
         white = _NOISE_LEVEL * y_clean.std() * rng.standard_normal(y_clean.shape)
