@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sklearn.metrics import r2_score
 
-from sknlss import SimulationDivergedWarning
+from sknlss import BLAEstimator, SimulationDivergedWarning
 from sknlss._core._model import StateSpaceModel
 from sknlss._core._sequences import (delayed_input, holdout_masks, periodic_sequences,
                                      sequence_bounds, transient_mask, undelayed_input)
@@ -25,6 +25,8 @@ def test_sequence_bounds():
     # A DataFrame column of object dtype holding integers.
     numbers = np.array([4, 4, 2], dtype=object)
     np.testing.assert_array_equal(sequence_bounds(numbers, 3), [0, 2, 3])
+    beyond_64_bits = np.array([2**64, 2**64, 1], dtype=object)
+    np.testing.assert_array_equal(sequence_bounds(beyond_64_bits, 3), [0, 2, 3])
 
 
 @pytest.mark.parametrize(
@@ -72,7 +74,7 @@ def test_holdout_masks():
 
 @settings(max_examples=30, deadline=None)
 @given(offset=st.floats(-1e3, 1e3), scale=st.floats(1e-3, 1e3), seed=st.integers(0, 2**16))
-def test_periodic_sequences_ignore_each_column_s_offset_and_scale(offset, scale, seed):
+def test_periodic_sequences_ignore_offsets_and_scales(offset, scale, seed):
     rng = np.random.default_rng(seed)
     period, starts = 8, np.array([0, 32, 64])
     U = rng.standard_normal((64, 2))
@@ -81,6 +83,18 @@ def test_periodic_sequences_ignore_each_column_s_offset_and_scale(offset, scale,
     np.testing.assert_array_equal(expected, [False, True])
     moved = U * [1.0, scale] + [0.0, offset]
     np.testing.assert_array_equal(periodic_sequences(moved, starts, period), expected)
+
+
+def test_periodic_records_exciting_one_input_at_a_time_repeat():
+    # The other input of each realization is measured noise only.
+    rng = np.random.default_rng(0)
+    period, blocks = 64, []
+    for excited in (0, 1):
+        one = np.zeros((period, 2))
+        one[:, excited] = rng.standard_normal(period)
+        blocks.append(np.tile(one, (4, 1)) + 1e-3 * rng.standard_normal((4 * period, 2)))
+    starts = np.array([0, 4 * period, 8 * period])
+    assert periodic_sequences(np.vstack(blocks), starts, period).all()
 
 
 @settings(max_examples=50, deadline=None)
@@ -184,6 +198,16 @@ def test_signals_stored_as_rows_are_refused(X_shape, y_shape, argument):
     # would be fitted as dozens of inputs and outputs.
     with pytest.raises(ValueError, match=argument + r".*rows are time samples.*reshape"):
         _FirstOrder().fit(np.ones(X_shape), np.ones(y_shape))
+
+
+def test_short_windows_of_several_outputs_are_not_training_records():
+    # Two samples of three outputs: a window to set a state, or to score.
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((400, 1))
+    y = np.column_stack([np.convolve(u[:, 0], [0.0, 1.0, 0.5])[:400] + k for k in range(3)])
+    model = BLAEstimator(n_states=1).fit(u, y)
+    assert np.all(np.isfinite(model.estimate_initial_state(u[:2], y[:2])))
+    assert np.isfinite(model.score(u[:2], y[:2]))
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])

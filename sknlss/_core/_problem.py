@@ -445,16 +445,10 @@ class SimulationErrorProblem:
         """The problem in the parameters ``free`` only, the others fixed at ``theta``.
 
         Returns an object with the ``residual`` and ``validation_loss`` of the
-        free parameters. The weight decay is left out when none of the
-        parameters it decays is free (a search in the linear part): its rows
-        would stay what they are at ``theta``.
+        free parameters, and the weight decay of this problem (its scale set
+        as for a start, see :meth:`with_decay_scale`).
         """
-        problem = self
-        decayed = self.model.terms_columns[np.flatnonzero(self.model.terms.decay_mask())]
-        if self.weight_decay and not np.isin(decayed, free).any():
-            problem = copy.copy(self)
-            problem.weight_decay = 0.0
-        return _Restricted(problem, theta, free)
+        return _Restricted(self, theta, free)
 
     def fit_loss(self, theta):
         """Mean squared simulation error of ``theta`` on the cost rows; inf when

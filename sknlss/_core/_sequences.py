@@ -10,7 +10,7 @@ import numbers
 import numpy as np
 
 #: A sequence repeats with the period when its periods differ from their mean
-#: by at most this fraction of each column's standard deviation (RMS): a random input
+#: by at most this fraction of its standard deviation (RMS): a random input
 #: differs by 70 % or more, a measured periodic one by its noise.
 PERIODIC_TOLERANCE = 0.2
 
@@ -46,7 +46,11 @@ def sequence_bounds(sequence_id, n_samples):
             ids = ids.astype(str)
         elif all(isinstance(label, numbers.Integral) and not isinstance(label, bool)
                  for label in ids):
-            ids = ids.astype(np.int64)
+            try:
+                ids = ids.astype(np.int64)
+            except OverflowError:
+                # Labels beyond 64 bits stay labels: as their decimal strings.
+                ids = ids.astype(str)
     if ids.dtype.kind not in "iubUS":
         # A float that is not a whole number is more likely a time vector
         # passed by mistake than a label.
@@ -199,11 +203,12 @@ def period_blocks(mask, starts, period):
 def periodic_sequences(U, starts, period, tolerance=PERIODIC_TOLERANCE):
     """Which sequences of ``U`` repeat with ``period``.
 
-    A sequence repeats when it is a whole number of periods and, in every
-    column, its periods differ from their mean by an RMS value within
-    ``tolerance`` times that column's standard deviation in the sequence (so
-    that neither an offset nor the scale of another column decides). A single
-    period counts as repeating: nothing tells it apart from one that does.
+    A sequence repeats when it is a whole number of periods and its periods
+    differ from their mean by an RMS value within ``tolerance`` times its own
+    standard deviation, both pooled over the columns, each column about its
+    own mean (so that an offset does not decide; a column of noise beside an
+    excited one, an input left unexcited, does not either). A single period
+    counts as repeating: nothing tells it apart from one that does.
 
     Returns
     -------
@@ -214,8 +219,8 @@ def periodic_sequences(U, starts, period, tolerance=PERIODIC_TOLERANCE):
         if (end - begin) % period:
             continue
         periods = U[begin:end].reshape(-1, period, U.shape[1])
-        spread = np.sqrt(np.mean((periods - periods.mean(axis=0)) ** 2, axis=(0, 1)))
-        repeats[k] = np.all(spread <= tolerance * np.std(U[begin:end], axis=0))
+        spread = np.sqrt(np.mean((periods - periods.mean(axis=0)) ** 2))
+        repeats[k] = spread <= tolerance * np.sqrt(np.mean(np.var(U[begin:end], axis=0)))
     return repeats
 
 

@@ -79,7 +79,6 @@ def _record_output(y):
     with naming("y"):
         y = check_array(y, ensure_2d=False, dtype=np.float64, input_name="y",
                         ensure_all_finite=False)
-    _refuse_rows_as_signals(y.shape, "y")
     _refuse_gaps(y, "y")
     return y
 
@@ -257,6 +256,7 @@ class _BaseStateSpace(RegressorMixin, BaseEstimator, metaclass=ABCMeta):
                 "target y is None."
             )
         y = _record_output(y)
+        _refuse_rows_as_signals(y.shape, "y")
         with naming("y"):
             check_consistent_length(X, y)
         self._y_was_1d = y.ndim == 1
