@@ -61,7 +61,8 @@ def _record_input(estimator, X, *, reset, ensure_min_samples=1):
             # it into one sample would turn a record into a single sample.
             if "got 1D array" not in str(error):
                 if reset:
-                    # (A record of one row is too short for scikit-learn.)
+                    # A signal stored as one row fails the minimum number of
+                    # samples: the advice is to transpose it.
                     _refuse_rows_as_signals(getattr(X, "shape", ()), "X")
                 raise
             raise ValueError(

@@ -582,7 +582,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         the output's mean: such a model should not be taken silently."""
         x0 = np.broadcast_to(self.x0_, (len(starts) - 1, self.n_states))
         Y_model, _, diverged = self._simulate_normalized(U, starts, x0, steady_state=True)
-        # As in the cost, every row of a sequence simulated in steady state counts.
+        # As in score, every row of a sequence simulated in steady state counts.
         rows = transient_mask(starts, np.where(self._steady_sequences(starts, U), 0,
                                                self._sequence_transients(starts)))
         if not rows.any():
