@@ -554,6 +554,16 @@ def test_huge_pnlss_is_refused_before_building_it():
         assert peak < 1 * 2**30
 
 
+def test_a_bla_refinement_beyond_the_memory_is_refused(monkeypatch):
+    # Its Jacobian grows with the lines, the inputs, the outputs and the
+    # square of the order: refused by name before it is built.
+    monkeypatch.setattr("sknlss._core._memory.available_memory", lambda: 100_000)
+    X, y = _clean_record(3, 400, 1, 1)
+    with pytest.raises(ValueError, match=r"BLA's model \(n_states=2.*memory.*max_iter=0"):
+        BLAEstimator(n_states=2).fit(X, y[:, 0])
+    BLAEstimator(n_states=2, max_iter=0).fit(X, y[:, 0])
+
+
 # ------------------------------------------------------------ public functions
 _ARRAYS = [np.zeros(0), np.array([1.0, np.nan]), np.array([1.0, np.inf]), np.ones((2, 2, 2)),
            np.array(["a", "b"]), np.array([1e300, -1e300]), np.array([True, False]), 3.0,

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 from sklearn.exceptions import ConvergenceWarning
 
+from .._core._memory import check_memory
 from .._core._model import StateSpaceModel
 from .._core._optimize import LMResult, levenberg_marquardt, warn_if_still_improving
 
@@ -275,6 +276,15 @@ def refine_frf(A, B, C, D, frequencies, G, weight, *, max_iter=100, tol=1e-10,
     result : LMResult
     """
     n, n_u, n_y = B.shape[0], B.shape[1], C.shape[0]
+    n_params = (n + n_y) * (n + n_u)
+    n_values = len(frequencies) * n_y * n_u
+    # The Jacobian's complex blocks, their concatenation, their weighted copy
+    # and its real and imaginary rows stacked: four copies of 16 bytes.
+    check_memory(
+        64 * n_values * n_params,
+        f"The refinement of the BLA's model (n_states={n}, {n_u} input(s), {n_y} "
+        f"output(s): {n_params:,} parameters fitted to the FRF's {n_values:,} values)",
+        "Use fewer states, or max_iter=0 to keep the subspace model.")
     z = np.exp(2j * np.pi * frequencies)
     eye = np.eye(n)
     w = weight
