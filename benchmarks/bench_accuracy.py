@@ -51,7 +51,7 @@ from sknlss import (
 )
 from sknlss import datasets as sd
 from sknlss.__main__ import _seed
-from sknlss.benchmarks import _fit_and_score
+from sknlss.benchmarks import _fit_and_score, _prepare_output
 
 #: Number of states of each simulated system's models (for the drive, whose
 #: loop holds four, chosen among 2-4 on fresh draws: see doc/benchmarks.rst).
@@ -258,7 +258,7 @@ def main():
     args = parser.parse_args()
     try:
         if args.output:
-            Path(args.output).mkdir(parents=True, exist_ok=True)
+            _prepare_output(args.output)
         runs_files = [args.summarize] if args.summarize else args.compare or []
         read = [_read_runs(path) for path in runs_files]
     except OSError as error:

@@ -24,9 +24,10 @@ def _integer(text, rule):
 
 
 def _seed(text):
-    value = _integer(text, "a random state is a non-negative integer")
+    rule = "a random state is a non-negative integer"
+    value = _integer(text, rule)
     if value < 0:
-        raise argparse.ArgumentTypeError(f"a random state is a non-negative integer, got {value}")
+        raise argparse.ArgumentTypeError(f"{rule}, got {value}")
     return value
 
 

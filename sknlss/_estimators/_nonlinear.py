@@ -582,9 +582,7 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         the output's mean: such a model should not be taken silently."""
         x0 = np.broadcast_to(self.x0_, (len(starts) - 1, self.n_states))
         Y_model, _, diverged = self._simulate_normalized(U, starts, x0, steady_state=True)
-        # As in score, every row of a sequence simulated in steady state counts.
-        rows = transient_mask(starts, np.where(self._steady_sequences(starts, U), 0,
-                                               self._sequence_transients(starts)))
+        rows = self._rows_after_transients(starts, U, self._sequence_transients(starts))
         if not rows.any():
             return
         error = np.inf if diverged else float(np.max(
@@ -805,9 +803,14 @@ class _BaseNonlinearStateSpace(_BaseStateSpace):
         return periodic_sequences(U, starts, self.period)
 
     def _scored_rows(self, starts, X):
-        # As in the cost, every sample of a steady-state sequence counts.
-        return transient_mask(starts, np.where(self._steady_sequences(starts, X), 0,
-                                               self.n_transient))
+        return self._rows_after_transients(starts, X, self.n_transient)
+
+    def _rows_after_transients(self, starts, U, n_transient):
+        """The rows of each sequence after its ``n_transient`` samples (an int,
+        or one per sequence), but all of those simulated in steady state for
+        the input ``U``: as in the cost, every sample of those counts."""
+        return transient_mask(starts, np.where(self._steady_sequences(starts, U), 0,
+                                               n_transient))
 
     def _simulate_normalized(self, U, starts, x0, steady_state=False):
         steady = self._steady_sequences(starts, U) & steady_state
